@@ -1,0 +1,223 @@
+"""The pymeshlab filter ``compute_curvature_cga_per_vertex``: CGA principal curvatures in a MeshSet.
+
+A thin adapter: it reads the current mesh, calls :func:`meshcurv.principal_curvatures` and writes
+the result back into the same mesh (same id, same vertices, same other attributes) through
+MeshLab's own per-vertex attribute and colour filters.
+"""
+
+import numpy as np
+import pymeshlab
+
+from meshcurv import principal_curvatures, shape
+from meshcurv.io import bbox_diagonal
+
+__all__ = ["compute_curvature_cga_per_vertex", "resolve_radius"]
+
+# Colour of vertices without an estimate, as a MeshLab colour expression (0..255).
+_GREY = str(shape.INVALID_COLOR[0])
+_MESHLAB_COLORMAPS = {c.lower(): c for c in shape.COLORMAPS}
+
+
+def resolve_radius(radius, vertices):
+    """Radius in model units from a PercentageValue, a PureValue, a number or None.
+
+    ``PercentageValue(p)`` is p percent of the bounding-box diagonal of the finite vertices
+    (:func:`meshcurv.io.bbox_diagonal`); ``PureValue(r)`` and plain numbers are model units;
+    None keeps the estimator's default (the ball holding about 100 points).
+    """
+    if radius is None:
+        return None
+    if isinstance(radius, pymeshlab.PercentageValue):
+        value = radius.value() / 100.0 * bbox_diagonal(vertices)
+    elif isinstance(radius, pymeshlab.PureValue):
+        value = radius.value()
+    elif isinstance(radius, (int, float, np.integer, np.floating)) and not isinstance(radius, bool):
+        value = float(radius)
+    else:
+        raise ValueError("radius must be a pymeshlab.PercentageValue, a pymeshlab.PureValue or a "
+                         f"number in model units, got {radius!r}")
+    if not (np.isfinite(value) and value > 0):
+        raise ValueError(f"radius must be positive, got {value}")
+    return float(value)
+
+
+def _has_scalar(mesh, name):
+    try:
+        mesh.vertex_custom_scalar_attribute_array(name)
+        return True
+    except pymeshlab.PyMeshLabException:
+        return False
+
+
+def _has_point(mesh, name):
+    try:
+        mesh.vertex_custom_point_attribute_matrix(name)
+        return True
+    except pymeshlab.PyMeshLabException:
+        return False
+
+
+def _fresh_name(mesh, stem):
+    k = 0
+    while _has_scalar(mesh, f"{stem}_{k}"):
+        k += 1
+    return f"{stem}_{k}"
+
+
+def _store_scalar(ms, name, values):
+    """Set the custom scalar attribute ``name`` of the current mesh to ``values`` (float64).
+
+    MeshLab cannot replace an attribute's data from Python, so when ``name`` exists (the filter
+    ran before) the new values go into a carrier attribute that MeshLab's expression filter
+    copies over, exactly (double precision).
+    """
+    mesh = ms.current_mesh()
+    values = np.ascontiguousarray(values, dtype=np.float64)
+    if not _has_scalar(mesh, name):
+        mesh.add_vertex_custom_scalar_attribute(values, name)
+        return
+    carrier = _fresh_name(mesh, "meshcurv_tmp")
+    mesh.add_vertex_custom_scalar_attribute(values, carrier)
+    ms.compute_new_custom_scalar_attribute_per_vertex(name=name, expr=carrier)
+
+
+def _store_point(ms, name, values):
+    """Set the custom point attribute ``name`` of the current mesh to (n, 3) ``values``."""
+    mesh = ms.current_mesh()
+    values = np.ascontiguousarray(values, dtype=np.float64)
+    if not _has_point(mesh, name):
+        mesh.add_vertex_custom_point_attribute(values, name)
+        return
+    carriers = []
+    for i in range(3):
+        carriers.append(_fresh_name(ms.current_mesh(), "meshcurv_tmp"))
+        ms.current_mesh().add_vertex_custom_scalar_attribute(values[:, i], carriers[-1])
+    ms.compute_new_custom_point_attribute_per_vertex(name=name, x_expr=carriers[0],
+                                                     y_expr=carriers[1], z_expr=carriers[2])
+
+
+def _usable_normals(n):
+    return (n is not None and len(n) and np.isfinite(n).all()
+            and bool((np.linalg.norm(n, axis=1) > 1e-12).all()))
+
+
+def compute_curvature_cga_per_vertex(self, radius=None, ndirections=8, neighborhood="auto",
+                                     quality="mean", colormap="Turbo", clamp=2.0,
+                                     normals="auto", slab=0.25):
+    """Principal curvatures by CGA circle fits (Seibert et al.) on the current mesh.
+
+    Works on triangle meshes and point clouds. Around each vertex, circles centred on the normal
+    line are fitted in ``2 * ndirections`` half normal sections; Euler's model fitted to their
+    curvatures gives k1 >= k2 and the principal directions. Sign: outward normals, convex
+    positive (a sphere of radius r: k1 = k2 = 1/r, shape index +1). Vertices are never added,
+    removed or reordered; the mesh keeps its id, name and other attributes.
+
+    Writes to the current mesh:
+
+    * vertex quality: the ``quality`` field; 0 where there is no estimate
+    * vertex colour: ``colormap`` over the ``quality`` field (shape index on [-1, 1], other
+      fields clamped at the ``clamp`` / 100 - ``clamp`` percentiles); grey where there is no
+      estimate
+    * custom scalar attributes ``k1, k2, mean, gaussian, shape_index, curvedness`` (NaN where
+      there is no estimate) and ``valid`` (1 or 0)
+    * custom point attributes ``d1, d2``: unit principal directions (NaN where invalid)
+
+    Parameter list:
+
+    radius : PercentageValue | PureValue | float = None
+        Neighbourhood radius. ``PercentageValue(p)``: p % of the bounding-box diagonal;
+        ``PureValue(r)`` or a float: model units; None: the radius whose ball holds about 100
+        points (works at any mesh size and sampling).
+    ndirections : int = 8
+        Normal-section planes per vertex (2 x ndirections circle fits).
+    neighborhood : str = 'auto'
+        'kring' (mesh-connected vertices within the radius, never crosses thin sheets), 'ball'
+        (all points within the radius) or 'auto' (kring for meshes, ball for point clouds).
+    quality : str = 'mean'
+        Field written to vertex quality and coloured: 'k1', 'k2', 'mean', 'gaussian',
+        'shape_index' or 'curvedness'.
+    colormap : str = 'Turbo'
+        MeshLab colour map: 'RGB', 'Viridis', 'Plasma', 'Cividis', 'Turbo' or 'RdPu'.
+    clamp : float = 2.0
+        Percent of values clipped at each end of the colour ramp (ignored for shape_index).
+    normals : str = 'auto'
+        'auto': for point clouds the mesh's own vertex normals when all are non-zero (loaded
+        from file or computed by a MeshLab filter), else estimated; for triangle meshes the
+        estimator's area-weighted face normals (what MeshLab computes on load, recomputed).
+        'mesh': always the mesh's vertex normals. 'estimate': always estimated (face normals,
+        or PCA over the same ball plus an MST orientation for point clouds).
+    slab : float = 0.25
+        Half-width of each section plane's slab, as a fraction of the radius.
+
+    Returns
+    -------
+    dict
+        ``radius_used`` (model units), ``n_vertices``, ``n_valid``, ``n_invalid``,
+        ``quality_field``, ``color_min``, ``color_max`` and, over the valid vertices,
+        ``<field>_mean``, ``<field>_min``, ``<field>_max`` for every field.
+
+    Examples
+    --------
+    >>> import pymeshlab, meshcurv.filters
+    >>> ms = pymeshlab.MeshSet()
+    >>> ms.create_torus(hradius=2.0, vradius=0.5)                          # doctest: +SKIP
+    >>> out = ms.compute_curvature_cga_per_vertex(radius=pymeshlab.PercentageValue(4),
+    ...                                           quality="shape_index")   # doctest: +SKIP
+    >>> ms.save_current_mesh("torus_si.ply")                               # doctest: +SKIP
+    """
+    if quality not in shape.FIELDS:
+        raise ValueError(f"quality must be one of {', '.join(shape.FIELDS)}, got {quality!r}")
+    cmap = _MESHLAB_COLORMAPS.get(str(colormap).lower())
+    if cmap is None:
+        raise ValueError(f"colormap must be one of {', '.join(shape.COLORMAPS)}, got {colormap!r}")
+    if normals not in ("auto", "mesh", "estimate"):
+        raise ValueError(f"normals must be 'auto', 'mesh' or 'estimate', got {normals!r}")
+    mesh = self.current_mesh()
+    if not mesh.is_compact():
+        mesh.compact()  # drops vertices MeshLab already marked deleted; the rest keep order
+    v = mesh.vertex_matrix()
+    if len(v) == 0:
+        raise ValueError("compute_curvature_cga_per_vertex: the current mesh has no vertices")
+    f = mesh.face_matrix()
+    point_cloud = len(f) == 0
+    mesh_normals = mesh.vertex_normal_matrix()
+    given = None
+    if normals == "mesh":
+        if not _usable_normals(mesh_normals):
+            raise ValueError("normals='mesh' but the current mesh has zero or non-finite "
+                             "vertex normals")
+        given = mesh_normals
+    elif normals == "auto" and point_cloud and _usable_normals(mesh_normals):
+        given = mesh_normals
+
+    res = principal_curvatures(v, None if point_cloud else f, normals=given,
+                               radius=resolve_radius(radius, v), n_directions=int(ndirections),
+                               neighborhood=neighborhood, slab=float(slab))
+
+    fields = {name: getattr(res, name) for name in shape.FIELDS}
+    for name, values in fields.items():
+        _store_scalar(self, name, values)
+    _store_scalar(self, "valid", res.valid.astype(np.float64))
+    _store_point(self, "d1", res.d1)
+    _store_point(self, "d2", res.d2)
+
+    # quality: NaN would break MeshLab's ramps and statistics, so invalid vertices read 0
+    self.compute_scalar_by_function_per_vertex(q=f"({quality} == {quality}) ? {quality} : 0")
+    lo, hi = shape.color_range(fields[quality], quality, clamp)
+    self.compute_color_from_scalar_per_vertex(minval=lo, maxval=hi, perc=0, zerosym=False,
+                                              colormap=cmap)
+    if not res.valid.all():
+        self.compute_color_by_function_per_vertex(
+            x=f"valid > 0 ? r : {_GREY}", y=f"valid > 0 ? g : {_GREY}",
+            z=f"valid > 0 ? b : {_GREY}", a="a")
+
+    ok = res.valid
+    summary = {"radius_used": float(res.radius), "n_vertices": int(len(v)),
+               "n_valid": int(ok.sum()), "n_invalid": int((~ok).sum()),
+               "quality_field": quality, "color_min": float(lo), "color_max": float(hi)}
+    for name, values in fields.items():
+        x = values[ok]
+        summary[f"{name}_mean"] = float(x.mean()) if x.size else float("nan")
+        summary[f"{name}_min"] = float(x.min()) if x.size else float("nan")
+        summary[f"{name}_max"] = float(x.max()) if x.size else float("nan")
+    return summary

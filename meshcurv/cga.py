@@ -1,0 +1,100 @@
+"""Conformal geometric algebra (CGA) pieces of the estimator: the point embedding and the
+osculating-circle fit of one normal section.
+
+A Euclidean point p is embedded as the conformal vector ``P = p + 1/2 |p|^2 e_inf + e_0``; a
+sphere with centre m and radius r is ``S = m + 1/2 (|m|^2 - r^2) e_inf + e_0``; the inner product
+``P . S = -1/2 (|p - m|^2 - r^2)`` is linear in S and vanishes exactly on the sphere, which is
+what turns circle fitting into a small eigenvalue problem.
+"""
+
+import numpy as np
+
+__all__ = ["conformal_embed", "conformal_inner", "circle_fit_rows", "fit_normal_circle"]
+
+
+def conformal_embed(points):
+    """Conformal embedding of Euclidean points.
+
+    Parameters
+    ----------
+    points : (n, 3) float
+
+    Returns
+    -------
+    (n, 5) float
+        Coefficients on (e1, e2, e3, e_inf, e_0): ``(p, |p|^2 / 2, 1)``.
+
+    Examples
+    --------
+    >>> conformal_embed(np.array([[1.0, 2.0, 2.0]]))
+    array([[1. , 2. , 2. , 4.5, 1. ]])
+    """
+    p = np.asarray(points, dtype=np.float64)
+    return np.column_stack([p, 0.5 * np.einsum("ij,ij->i", p, p), np.ones(len(p))])
+
+
+def conformal_inner(a, b):
+    """Inner product of conformal vectors given on (e1, e2, e3, e_inf, e_0), shape (..., 5).
+
+    The metric has e_inf . e_0 = -1 and e_inf^2 = e_0^2 = 0, so for two embedded points
+    ``P . Q = -|p - q|^2 / 2``.
+    """
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    return (a[..., :3] * b[..., :3]).sum(-1) - a[..., 3] * b[..., 4] - a[..., 4] * b[..., 3]
+
+
+def circle_fit_rows(q, normal):
+    """Rows ``w = (q . n, -1, -|q|^2 / 2)`` of the circle-fit matrix, for points relative to x.
+
+    A sphere whose centre lies on the normal line, ``S = t3 (x + c n) + t3 e_0 + t2 e_inf`` with
+    ``t1 = t3 c``, has ``P . S = t1 (q . n) - t2 - t3 |q|^2 / 2`` once x is moved to the origin,
+    i.e. ``P . S = w . t``. Centring at x is what keeps the fit precise at large coordinates.
+
+    Parameters
+    ----------
+    q : (k, 3) float, points relative to the estimation point x
+    normal : (3,) float, unit normal at x
+
+    Returns
+    -------
+    (k, 3) float
+    """
+    q = np.asarray(q, dtype=np.float64)
+    return np.column_stack([q @ normal, -np.ones(len(q)), -0.5 * np.einsum("ij,ij->i", q, q)])
+
+
+def fit_normal_circle(q, normal, weights=None):
+    """Signed curvature of the best sphere centred on the normal line through x (at the origin).
+
+    Minimises ``sum_j w_j (P_j . S)^2`` over ``|t| = 1``: t is the eigenvector of the smallest
+    eigenvalue of ``B = W^T diag(w) W``. The sphere's centre is at ``x + (t1 / t3) n``, so the
+    curvature is ``kappa = -t3 / t1``: positive where the points bend away from the normal
+    (a convex cap under an outward normal), zero for a straight line.
+
+    Parameters
+    ----------
+    q : (k, 3) float, points relative to x (x itself contributes the row (0, -1, 0))
+    normal : (3,) float, unit normal at x
+    weights : (k,) float, optional
+
+    Returns
+    -------
+    kappa : float, 1 / length units of q
+    residual : float, the smallest eigenvalue of B (sum of squared algebraic distances)
+
+    Examples
+    --------
+    >>> a = np.linspace(-0.5, 0.5, 11)
+    >>> q = np.column_stack([np.sin(a), np.zeros(11), np.cos(a) - 1.0])   # unit circle below x
+    >>> float(round(fit_normal_circle(q, np.array([0.0, 0.0, 1.0]))[0], 12))
+    1.0
+    """
+    w = circle_fit_rows(q, normal)
+    if weights is not None:
+        b = (w * np.asarray(weights, dtype=np.float64)[:, None]).T @ w
+    else:
+        b = w.T @ w
+    vals, vecs = np.linalg.eigh(b)
+    t = vecs[:, 0]
+    return -t[2] / t[0], vals[0]

@@ -1,0 +1,558 @@
+"""The ``meshcurv`` command: annotate files with principal curvatures, in batches, and inspect them.
+
+Subcommands ``annotate``, ``batch`` and ``info``; run ``meshcurv --help``. Exit codes: 0 success,
+1 a file could not be processed (or, for ``batch``, at least one failed), 2 command-line error.
+Expected errors print one line ``meshcurv: error: ...`` on stderr and leave no output file.
+"""
+
+import argparse
+import os
+import sys
+import time
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import io, shape
+
+__all__ = ["main", "AnnotateOptions", "parse_radius", "annotate_file", "run_batch"]
+
+_DESCRIPTION = """\
+Principal curvatures of meshes and point clouds by CGA circle fits (Seibert et al.).
+
+Conventions: curvatures are in 1/model units, signed for OUTWARD normals with convex positive
+(a sphere of radius r gives k1 = k2 = +1/r, shape index +1), and k1 >= k2. Radii are given
+either in model units (--radius 0.05) or in percent of the bounding-box diagonal
+(--radius 2%%), as in MeshLab. Vertices are never reordered, merged or dropped (STL corners are
+merged by position on reading); vertices without an estimate have NaN curvature, valid = 0,
+quality 0 and a grey colour.
+
+Exit codes: 0 success, 1 a file could not be processed, 2 command-line error."""
+
+_RADIUS_HELP = ("neighbourhood radius: a number in model units (0.05) or a percentage of the "
+                "bounding-box diagonal (2%%); default: the radius whose ball holds ~100 points")
+
+
+class CommandError(Exception):
+    """An expected error with a one-line message and an exit code."""
+
+    def __init__(self, message, code=1):
+        super().__init__(message)
+        self.code = code
+
+
+@dataclass(frozen=True)
+class AnnotateOptions:
+    """Estimation and output options shared by ``annotate`` and ``batch`` (picklable).
+
+    radius : str or None, "2%" (of the bbox diagonal) or "0.05" (model units); None = default
+    directions : int, planes through the normal (2 x directions circle fits)
+    neighborhood : "auto" | "kring" | "ball"
+    normals : "auto" (file normals for point clouds that have them, else estimated) |
+        "file" (require normals in the file) | "estimate" (ignore file normals)
+    quality : field written to ``quality`` and coloured
+    colormap : MeshLab colour map name, see :data:`meshcurv.shape.COLORMAPS`
+    """
+
+    radius: str = None
+    directions: int = 8
+    neighborhood: str = "auto"
+    normals: str = "auto"
+    quality: str = "mean"
+    colormap: str = "Turbo"
+
+
+def parse_radius(text):
+    """Parse a radius option: ``"2%"`` -> (2.0, True), ``"0.05"`` -> (0.05, False).
+
+    Raises ValueError for anything that is not a positive finite number, optionally with ``%``.
+    """
+    s = str(text).strip()
+    percent = s.endswith("%")
+    try:
+        value = float(s[:-1] if percent else s)
+    except ValueError:
+        raise ValueError(f"radius must be a number (model units) or a percentage like 2%, "
+                         f"got {text!r}") from None
+    if not (np.isfinite(value) and value > 0):
+        raise ValueError(f"radius must be positive, got {text!r}")
+    return value, percent
+
+
+def _radius_in_model_units(spec, vertices):
+    """Absolute radius for ``spec`` ("2%", "0.05" or None = the estimator's default)."""
+    if spec is None:
+        return None
+    value, percent = parse_radius(spec)
+    return value / 100.0 * io.bbox_diagonal(vertices) if percent else value
+
+
+def _check_options(options):
+    """Raise CommandError(code 2) for option values no file can fix."""
+    try:
+        if options.radius is not None:
+            parse_radius(options.radius)
+        if options.quality not in shape.FIELDS:
+            raise ValueError(f"--quality must be one of {', '.join(shape.FIELDS)}")
+        if options.colormap.lower() not in (c.lower() for c in shape.COLORMAPS):
+            raise ValueError(f"--colormap must be one of {', '.join(shape.COLORMAPS)}")
+        if int(options.directions) < 3:
+            raise ValueError("--directions must be at least 3")
+    except ValueError as exc:
+        raise CommandError(str(exc), 2) from None
+
+
+def _normals_for(data, mode):
+    """Normals to pass to the estimator, following ``AnnotateOptions.normals``."""
+    if mode == "estimate":
+        return None
+    n = data.normals
+    usable = (n is not None and np.isfinite(n).all()
+              and (np.linalg.norm(n, axis=1) > 1e-12).all())
+    if mode == "file":
+        if not usable:
+            raise io.MeshFileError(f"{data.path}: --normals file, but the file has no usable "
+                                   "per-vertex normals (nx ny nz, finite, non-zero)")
+        return n
+    # auto: a point cloud's own normals (scanner, MeshLab) beat a PCA guess; for meshes the
+    # estimator's face normals are as good and consistently oriented by the faces
+    return n if (usable and data.is_point_cloud) else None
+
+
+def annotate_file(input_path, output_path, options=AnnotateOptions(), preview=None,
+                  progress=False):
+    """Read ``input_path``, estimate curvatures, write the annotated PLY ``output_path``.
+
+    Returns a dict of summary values (``n_vertices, n_faces, n_valid, radius, seconds``).
+    Raises :class:`meshcurv.io.MeshFileError` or ValueError (message names the file) for bad
+    input; no output file is left behind then.
+    """
+    from .estimator import principal_curvatures
+
+    t0 = time.perf_counter()
+    io.check_distinct(input_path, output_path)
+    if preview is not None:
+        io.check_distinct(input_path, preview)
+    data = io.read(input_path)
+    n_finite = int(np.isfinite(data.vertices).all(axis=1).sum())
+    if n_finite < 4:
+        raise io.MeshFileError(f"{input_path}: too few points ({n_finite}) for a curvature "
+                               "estimate")
+    radius = _radius_in_model_units(options.radius, data.vertices)
+    try:
+        result = principal_curvatures(
+            data.vertices, None if data.is_point_cloud else data.faces,
+            normals=_normals_for(data, options.normals), radius=radius,
+            n_directions=int(options.directions), neighborhood=options.neighborhood,
+            progress=progress)
+    except ValueError as exc:
+        raise io.MeshFileError(f"{input_path}: {exc}") from exc
+    n_valid = int(result.valid.sum())
+    if n_valid == 0:
+        raise io.MeshFileError(f"{input_path}: no vertex got a curvature estimate "
+                               f"({len(data.vertices)} vertices, radius {result.radius:.6g}); "
+                               "try a larger --radius")
+    io.write(output_path, data, result, quality=options.quality, colormap=options.colormap)
+    if preview is not None:
+        try:
+            write_preview(preview, data, result)
+        except BaseException:
+            os.remove(output_path)  # all or nothing
+            raise
+    return {"input": os.fspath(input_path), "output": os.fspath(output_path),
+            "n_vertices": len(data.vertices),
+            "n_faces": 0 if data.is_point_cloud else len(data.faces),
+            "n_valid": n_valid, "n_nonfinite": len(data.vertices) - n_finite,
+            "radius": result.radius, "seconds": time.perf_counter() - t0}
+
+
+def write_preview(path, data, result, elev=30.0, azim=-60.0):
+    """Render a PNG of the surface coloured by shape index (matplotlib, Agg), atomically.
+
+    Meshes are drawn as shaded triangles, point clouds as points; invalid vertices are grey.
+    """
+    if io._extension(path) != ".png":
+        raise io.MeshFileError(f"{path}: the preview must be a .png file")
+    try:
+        import matplotlib
+    except ImportError:
+        raise io.MeshFileError(f"{path}: --preview needs matplotlib "
+                               "(pip install 'meshcurv[plot]')") from None
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import LinearSegmentedColormap, Normalize
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    v = data.vertices
+    si = np.where(result.valid, result.shape_index, np.nan)
+    lo, hi = np.nanmin(v, axis=0), np.nanmax(v, axis=0)
+    fig = plt.figure(figsize=(7, 6), dpi=110)
+    ax = fig.add_subplot(projection="3d")
+    ax.view_init(elev=elev, azim=azim)
+    # unit light towards the viewer, from the camera angles, for Lambert shading
+    e, a = np.radians(elev), np.radians(azim)
+    light = np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
+    if not data.is_point_cloud:
+        f = data.faces[np.isfinite(v[data.faces]).all(axis=(1, 2))]
+        tri = v[f]
+        fn = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        fn /= np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-300)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # faces with no valid corner
+            face_si = np.nanmean(si[f], axis=1)
+        rgb = shape.colorize(face_si, "shape_index").astype(float) / 255.0
+        rgb *= (0.35 + 0.65 * np.abs(fn @ light))[:, None]
+        ax.add_collection3d(Poly3DCollection(tri, facecolors=rgb, edgecolors="none",
+                                             linewidths=0))
+    else:
+        keep = np.flatnonzero(np.isfinite(v).all(axis=1))
+        if len(keep) > 200_000:
+            keep = np.sort(np.random.default_rng(0).choice(keep, 200_000, replace=False))
+        rgb = shape.colorize(si[keep], "shape_index").astype(float) / 255.0
+        ax.scatter(v[keep, 0], v[keep, 1], v[keep, 2], c=rgb, s=2, depthshade=True,
+                   linewidths=0)
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    ax.set_zlim(lo[2], hi[2])
+    ax.set_box_aspect(np.maximum(hi - lo, 1e-9 * max(float(np.max(hi - lo)), 1.0)))
+    ax.set_axis_off()
+    lut = shape._LUT["turbo"] / 255.0
+    sm = plt.cm.ScalarMappable(norm=Normalize(-1, 1),
+                               cmap=LinearSegmentedColormap.from_list("meshlab_turbo", lut))
+    bar = fig.colorbar(sm, ax=ax, shrink=0.6, pad=0.02)
+    bar.set_ticks([-1, -0.5, 0, 0.5, 1])
+    bar.set_ticklabels(["cup -1", "rut -0.5", "saddle 0", "ridge 0.5", "cap +1"])
+    bar.set_label("shape index (outward normals; grey: no estimate)")
+    name = os.path.basename(data.path) if data.path else "surface"
+    ax.set_title(f"{name}: shape index, radius {result.radius:.4g}")
+    try:
+        io.atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", bbox_inches="tight"))
+    finally:
+        plt.close(fig)
+
+
+# ------------------------------------------------------------------------------------ batch
+
+def _run_one(input_path, output_path, options):
+    """Annotate one file; never raises. Returns a dict with ``status`` "ok" or "failed".
+
+    The task both the process pool and Dask workers run: arguments are plain paths and a
+    frozen dataclass, so nothing heavy crosses process boundaries.
+    """
+    try:
+        summary = annotate_file(input_path, output_path, options)
+        summary["status"] = "ok"
+        return summary
+    except (io.MeshFileError, ValueError, OSError) as exc:
+        message = str(exc)
+    except Exception as exc:  # a bug, but one bad file must not stop a batch
+        message = f"{type(exc).__name__}: {exc}"
+    return {"input": input_path, "output": output_path, "status": "failed",
+            "error": message.splitlines()[0] if message else "failed"}
+
+
+def _init_worker(threads):
+    """Process-pool initializer: share the cores among workers instead of oversubscribing."""
+    try:
+        import numba
+        numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
+    except Exception:
+        pass
+
+
+def _expand_inputs(inputs):
+    """Input paths; a directory contributes its readable files (not recursive), sorted."""
+    out = []
+    for p in inputs:
+        if os.path.isdir(p):
+            out.extend(sorted(os.path.join(p, f) for f in os.listdir(p)
+                              if io._extension(f) in io.READERS
+                              and os.path.isfile(os.path.join(p, f))))
+        else:
+            out.append(p)
+    return out
+
+
+def output_path_for(input_path, out_dir, suffix="_curvature", extension=".ply"):
+    """``out_dir/<stem><suffix>.ply`` for an input file."""
+    stem = os.path.splitext(os.path.basename(input_path))[0]
+    return os.path.join(out_dir, stem + suffix + extension)
+
+
+def run_batch(inputs, out_dir, options=AnnotateOptions(), jobs=1, overwrite=False,
+              scheduler=None, progress=None):
+    """Annotate many files; returns a list of per-file result dicts, in input order.
+
+    Each dict has ``input, output, status`` ("ok", "skipped" or "failed") and, for failures,
+    ``error``. Outputs that exist are skipped unless ``overwrite`` (writes are atomic, so an
+    existing output is complete). ``jobs > 1`` uses that many processes; ``scheduler`` (a Dask
+    scheduler address or a ``distributed.Client``) runs the files on a Dask cluster whose
+    workers see the same paths.
+    """
+    from tqdm.auto import tqdm
+
+    inputs = [os.path.abspath(p) for p in _expand_inputs(inputs)]
+    out_dir = os.path.abspath(out_dir)
+    outputs = [output_path_for(p, out_dir) for p in inputs]
+    seen = {}
+    for i, o in zip(inputs, outputs):
+        if o in seen:
+            raise CommandError(f"{i} and {seen[o]} would both write {o}; rename one", 2)
+        seen[o] = i
+    results = [None] * len(inputs)
+    todo = []
+    for k, (i, o) in enumerate(zip(inputs, outputs)):
+        if os.path.exists(o) and not overwrite:
+            results[k] = {"input": i, "output": o, "status": "skipped"}
+        else:
+            todo.append(k)
+    os.makedirs(out_dir, exist_ok=True)
+    bar = tqdm(total=len(todo), desc="meshcurv batch", unit="file", file=sys.stderr,
+               disable=progress is False or (progress is None and not sys.stderr.isatty()))
+
+    def record(k, res):
+        results[k] = res
+        bar.update(1)
+        if res["status"] == "failed":
+            bar.write(f"failed: {res['error']}", file=sys.stderr)
+
+    try:
+        if scheduler is not None and todo:
+            _batch_dask(scheduler, inputs, outputs, options, todo, record)
+        elif jobs > 1 and len(todo) > 1:
+            import multiprocessing
+            from concurrent.futures import ProcessPoolExecutor, as_completed
+
+            threads = max(1, (os.cpu_count() or 1) // jobs)
+            with ProcessPoolExecutor(max_workers=min(jobs, len(todo)),
+                                     mp_context=multiprocessing.get_context("spawn"),
+                                     initializer=_init_worker, initargs=(threads,)) as pool:
+                futures = {pool.submit(_run_one, inputs[k], outputs[k], options): k
+                           for k in todo}
+                for fut in as_completed(futures):
+                    k = futures[fut]
+                    try:
+                        res = fut.result()
+                    except Exception as exc:  # worker died (e.g. out of memory)
+                        res = {"input": inputs[k], "output": outputs[k], "status": "failed",
+                               "error": f"worker failed: {type(exc).__name__}: {exc}"}
+                    record(k, res)
+        else:
+            for k in todo:
+                record(k, _run_one(inputs[k], outputs[k], options))
+    finally:
+        bar.close()
+    return results
+
+
+def _batch_dask(scheduler, inputs, outputs, options, todo, record):
+    """Run the pending files as Dask tasks; file paths travel, data stays on the workers."""
+    try:
+        from distributed import Client, as_completed
+    except ImportError:
+        raise CommandError("--dask-scheduler needs dask.distributed "
+                           "(pip install 'meshcurv[dask]')", 2) from None
+    own = not hasattr(scheduler, "submit")
+    try:
+        client = Client(scheduler, timeout="20s") if own else scheduler
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise CommandError(f"cannot connect to the Dask scheduler {scheduler}: {exc}") from None
+    try:
+        futures = {client.submit(_run_one, inputs[k], outputs[k], options, pure=False,
+                                 key=f"meshcurv-{k}-{os.path.basename(inputs[k])}-{time.time_ns()}"):
+                   k for k in todo}
+        for fut in as_completed(futures):
+            k = futures[fut]
+            try:
+                res = fut.result()
+            except Exception as exc:
+                res = {"input": inputs[k], "output": outputs[k], "status": "failed",
+                       "error": f"worker failed: {type(exc).__name__}: {exc}"}
+            record(k, res)
+    finally:
+        if own:
+            client.close()
+
+
+# ------------------------------------------------------------------------------------- info
+
+def info_text(path):
+    """Text summary of a file: geometry and, for annotated files, curvature statistics."""
+    data = io.read(path)
+    n = len(data.vertices)
+    kind = "point cloud" if data.is_point_cloud else f"mesh, {len(data.faces)} faces"
+    lines = [f"{path}: {n} vertices ({kind}), bounding-box diagonal "
+             f"{io.bbox_diagonal(data.vertices):.6g}"]
+    if "k1" not in data.fields or "k2" not in data.fields:
+        lines.append("not annotated (no k1, k2 vertex properties); "
+                     f"run: meshcurv annotate {path} -o OUT.ply")
+        return "\n".join(lines)
+    valid = (np.asarray(data.fields["valid"]).astype(bool) if "valid" in data.fields
+             else np.isfinite(data.fields["k1"]))
+    lines.append(f"valid: {int(valid.sum())} of {n} ({100.0 * valid.mean():.1f} %)")
+    header = f"{'field':<12}{'min':>12}{'p2':>12}{'median':>12}{'p98':>12}{'max':>12}{'mean':>12}"
+    lines.append(header)
+    for name in shape.FIELDS:
+        if name not in data.fields:
+            continue
+        x = np.asarray(data.fields[name], dtype=np.float64)[valid]
+        x = x[np.isfinite(x)]
+        if x.size == 0:
+            lines.append(f"{name:<12}{'(no valid values)':>24}")
+            continue
+        stats = [x.min(), *np.percentile(x, [2, 50, 98]), x.max(), x.mean()]
+        lines.append(f"{name:<12}" + "".join(f"{s:>12.5g}" for s in stats))
+    if "n_neighbors" in data.fields:
+        nb = np.asarray(data.fields["n_neighbors"])[valid]
+        if nb.size:
+            lines.append(f"neighbours per vertex: median {np.median(nb):.0f}, "
+                         f"min {nb.min()}, max {nb.max()}")
+    return "\n".join(lines)
+
+
+# -------------------------------------------------------------------------------- argparse
+
+def _add_estimation_options(p):
+    """Options shared by annotate and batch (one place to add new ones)."""
+    g = p.add_argument_group("estimation")
+    g.add_argument("--radius", "-r", default=None, metavar="R", help=_RADIUS_HELP)
+    g.add_argument("--directions", "-d", type=int, default=8, metavar="N",
+                   help="planes through the normal; 2 x N circle fits per vertex (default 8)")
+    g.add_argument("--neighborhood", choices=("auto", "kring", "ball"), default="auto",
+                   help="kring: mesh-connected vertices within R (never crosses thin sheets); "
+                        "ball: all points within R; auto: kring for meshes, ball for clouds")
+    g.add_argument("--normals", choices=("auto", "file", "estimate"), default="auto",
+                   help="auto: a point cloud's own normals if the file has them, else "
+                        "estimated (face normals for meshes, PCA + orientation for clouds); "
+                        "file: require the file's normals; estimate: ignore them")
+    g = p.add_argument_group("output")
+    g.add_argument("--quality", choices=shape.FIELDS, default="mean",
+                   help="field copied to the PLY 'quality' property and coloured (default mean)")
+    g.add_argument("--colormap", default="Turbo", metavar="NAME",
+                   help=f"colour ramp, MeshLab's names: {', '.join(shape.COLORMAPS)} "
+                        "(default Turbo; shape index on [-1, 1], other fields clamped at the "
+                        "2nd/98th percentile)")
+
+
+def _options_from(args):
+    return AnnotateOptions(radius=args.radius, directions=args.directions,
+                           neighborhood=args.neighborhood, normals=args.normals,
+                           quality=args.quality, colormap=args.colormap)
+
+
+def build_parser():
+    """The argparse parser of the ``meshcurv`` command."""
+    from . import __version__
+
+    parser = argparse.ArgumentParser(
+        prog="meshcurv", description=_DESCRIPTION,
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--version", action="version", version=f"meshcurv {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    readable = ", ".join(sorted(io.READERS))
+
+    p = sub.add_parser(
+        "annotate", help="write a PLY with per-vertex curvature fields",
+        description=_DESCRIPTION + f"\n\nReads {readable}; writes a binary PLY with float64 "
+        "vertex properties k1 k2 mean gaussian shape_index curvedness, valid (uint8), d1x..d2z, "
+        "nx ny nz, n_neighbors, n_samples, residual, quality and red green blue.",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("input", help=f"mesh or point cloud ({readable})")
+    p.add_argument("-o", "--output", required=True, help="annotated output, .ply")
+    p.add_argument("--preview", metavar="PNG", default=None,
+                   help="also render a PNG coloured by shape index (needs matplotlib)")
+    p.add_argument("--progress", action="store_true", help="show a per-point progress bar")
+    _add_estimation_options(p)
+
+    p = sub.add_parser(
+        "batch", help="annotate many files (resumable, parallel, optionally on Dask)",
+        description=_DESCRIPTION + "\n\nWrites OUT_DIR/<name>_curvature.ply per input; files "
+        "whose output exists are skipped (re-run to resume); a failing file is reported and "
+        "the batch goes on; the exit code is 1 if any file failed.",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("inputs", nargs="+", help="input files or directories (their readable files)")
+    p.add_argument("--out-dir", "-O", required=True, help="directory for the annotated PLYs")
+    p.add_argument("--jobs", "-j", type=int, default=1, help="parallel processes (default 1)")
+    p.add_argument("--overwrite", action="store_true", help="recompute existing outputs")
+    p.add_argument("--dask-scheduler", metavar="ADDRESS", default=None,
+                   help="run on a Dask distributed cluster (e.g. tcp://host:8786); the "
+                        "workers must see the same file paths")
+    _add_estimation_options(p)
+
+    p = sub.add_parser("info", help="curvature statistics of an annotated file",
+                       description="Print geometry and, for an annotated PLY, statistics of "
+                                   "each curvature field over the valid vertices.")
+    p.add_argument("file")
+    return parser
+
+
+def _cmd_annotate(args):
+    options = _options_from(args)
+    _check_options(options)
+    if io._extension(args.output) not in io.WRITERS:
+        raise CommandError(f"{args.output}: output must be one of "
+                           f"{', '.join(sorted(io.WRITERS))}", 2)
+    if args.preview is not None and io._extension(args.preview) != ".png":
+        raise CommandError(f"{args.preview}: --preview must be a .png file", 2)
+    try:
+        io.check_distinct(args.input, args.output)
+    except io.MeshFileError as exc:
+        raise CommandError(str(exc), 2) from None
+    s = annotate_file(args.input, args.output, options, preview=args.preview,
+                      progress=args.progress)
+    if s["n_nonfinite"]:
+        print(f"meshcurv: warning: {s['n_nonfinite']} vertices have non-finite coordinates; "
+              "their curvature is NaN", file=sys.stderr)
+    print(f"{s['output']}: {s['n_valid']} of {s['n_vertices']} vertices estimated, radius "
+          f"{s['radius']:.6g} (model units), {s['seconds']:.1f} s")
+    if args.preview:
+        print(f"{args.preview}: preview coloured by shape index")
+    return 0
+
+
+def _cmd_batch(args):
+    options = _options_from(args)
+    _check_options(options)
+    if args.jobs < 1:
+        raise CommandError("--jobs must be at least 1", 2)
+    results = run_batch(args.inputs, args.out_dir, options, jobs=args.jobs,
+                        overwrite=args.overwrite, scheduler=args.dask_scheduler)
+    counts = {s: sum(r["status"] == s for r in results) for s in ("ok", "skipped", "failed")}
+    print(f"meshcurv batch: {counts['ok']} annotated, {counts['skipped']} skipped (output "
+          f"exists), {counts['failed']} failed, in {args.out_dir}")
+    for r in results:
+        if r["status"] == "failed":
+            print(f"  FAILED {r['input']}: {r['error']}", file=sys.stderr)
+    return 1 if counts["failed"] else 0
+
+
+def _cmd_info(args):
+    print(info_text(args.file))
+    return 0
+
+
+_COMMANDS = {"annotate": _cmd_annotate, "batch": _cmd_batch, "info": _cmd_info}
+
+
+def main(argv=None):
+    """Entry point of the ``meshcurv`` console script; returns the exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return _COMMANDS[args.command](args)
+    except CommandError as exc:
+        print(f"meshcurv: error: {exc}", file=sys.stderr)
+        return exc.code
+    except (io.MeshFileError, ValueError, OSError) as exc:
+        print(f"meshcurv: error: {str(exc).splitlines()[0] if str(exc) else exc!r}",
+              file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("meshcurv: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,384 @@
+"""Mesh and point-cloud files: read geometry, write and read curvature-annotated binary PLY.
+
+Readers never merge, reorder or drop vertices (one output row per vertex of the file), with one
+exception: STL stores unshared triangle corners, which are merged by exact position in order of
+first appearance (as MeshLab does on import) so that triangles share vertices.
+
+Readers and writers are looked up by file extension in :data:`READERS` and :data:`WRITERS`;
+:func:`register_reader` / :func:`register_writer` add formats.
+
+The annotated PLY (:func:`write_annotated`) is binary little-endian with named vertex
+properties: ``x y z nx ny nz`` (float64), ``k1 k2 mean gaussian shape_index curvedness``
+(float64, NaN where invalid), ``valid`` (uint8), ``d1x d1y d1z d2x d2y d2z`` (float64),
+``n_neighbors n_samples`` (int32), ``residual`` (float64), ``quality`` (float64, the chosen
+field with 0 where invalid) and ``red green blue`` (uint8), plus the ``face`` element.
+plyfile, Open3D and MeshLab read these at full precision.
+"""
+
+import os
+import tempfile
+from dataclasses import dataclass, field as dc_field
+
+import numpy as np
+
+from . import shape
+
+__all__ = ["MeshData", "MeshFileError", "READERS", "WRITERS", "register_reader",
+           "register_writer", "read", "write", "write_ply", "write_annotated", "atomic_write",
+           "check_distinct", "bbox_diagonal", "ANNOTATED_FIELDS"]
+
+# Vertex properties of an annotated PLY, besides geometry and colour, in file order.
+ANNOTATED_FIELDS = (shape.FIELDS + ("valid", "d1x", "d1y", "d1z", "d2x", "d2y", "d2z",
+                                    "n_neighbors", "n_samples", "residual", "quality"))
+_GEOMETRY = ("x", "y", "z", "nx", "ny", "nz")
+_COLOR = ("red", "green", "blue", "alpha")
+
+
+class MeshFileError(ValueError):
+    """A file that cannot be read or written; the message starts with the file name."""
+
+
+@dataclass
+class MeshData:
+    """Geometry of a mesh or point cloud as read from a file; one row per vertex, file order.
+
+    vertices : (n, 3) float64, model units
+    faces : (m, 3) int64, or None for a point cloud
+    normals : (n, 3) float64 from the file, or None
+    fields : dict of other per-vertex properties, name -> (n,) array (PLY only; e.g. the
+        curvature fields of an annotated file)
+    path : the file it came from
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray = None
+    normals: np.ndarray = None
+    fields: dict = dc_field(default_factory=dict)
+    path: str = ""
+
+    @property
+    def is_point_cloud(self):
+        """True when there are no faces."""
+        return self.faces is None or len(self.faces) == 0
+
+
+def bbox_diagonal(vertices):
+    """Length of the bounding-box diagonal of the finite rows of (n, 3) ``vertices``.
+
+    The reference length of percentage radii (``2%``), as in MeshLab's ``PercentageValue``.
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    v = v[np.isfinite(v).all(axis=1)]
+    if len(v) == 0:
+        return 0.0
+    return float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
+
+
+# ---------------------------------------------------------------------------------- readers
+
+def _triangulate(polygons):
+    """Fan-triangulate a list of index polygons; vertices are left untouched."""
+    tris = []
+    for p in polygons:
+        p = np.asarray(p, dtype=np.int64)
+        if len(p) < 3:
+            continue
+        tris.append(np.column_stack([np.full(len(p) - 2, p[0]), p[1:-1], p[2:]]))
+    if not tris:
+        return np.zeros((0, 3), dtype=np.int64)
+    return np.concatenate(tris)
+
+
+def read_ply(path):
+    """Read a PLY mesh or point cloud (ASCII or binary) with all vertex properties.
+
+    Faces are read from the ``face`` element (``vertex_indices`` or ``vertex_index``);
+    polygons are fan-triangulated. ``nx ny nz`` become ``normals``; every other vertex property
+    except ``x y z`` and colour goes to ``fields`` unchanged (same dtype).
+    """
+    from plyfile import PlyData
+
+    ply = PlyData.read(path)
+    names = [e.name for e in ply.elements]
+    if "vertex" not in names:
+        raise ValueError("no 'vertex' element")
+    vert = ply["vertex"].data
+    props = vert.dtype.names or ()
+    if not all(c in props for c in "xyz"):
+        raise ValueError("vertex element lacks x, y, z")
+    vertices = np.column_stack([np.asarray(vert[c], dtype=np.float64) for c in "xyz"])
+    normals = None
+    if all(c in props for c in ("nx", "ny", "nz")):
+        normals = np.column_stack([np.asarray(vert[c], dtype=np.float64)
+                                   for c in ("nx", "ny", "nz")])
+    fields = {p: np.asarray(vert[p]) for p in props if p not in _GEOMETRY and p not in _COLOR}
+    faces = None
+    if "face" in names:
+        fdata = ply["face"].data
+        key = next((k for k in ("vertex_indices", "vertex_index") if k in fdata.dtype.names), None)
+        if key is not None and len(fdata):
+            col = fdata[key]
+            if col.dtype != object and col.ndim == 2 and col.shape[1] == 3:
+                faces = np.asarray(col, dtype=np.int64)
+            else:
+                lens = {len(p) for p in col}
+                faces = (np.stack(col).astype(np.int64) if lens == {3} else _triangulate(col))
+            if faces.size and (faces.min() < 0 or faces.max() >= len(vertices)):
+                raise ValueError(f"face indices outside 0..{len(vertices) - 1}")
+    return MeshData(vertices=vertices, faces=faces, normals=normals, fields=fields, path=path)
+
+
+def _merge_exact(vertices, faces):
+    """Merge vertices with identical coordinates, keeping the order of first appearance."""
+    _, first, inverse = np.unique(vertices, axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first, kind="stable")
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    return vertices[first[order]], rank[inverse.ravel()][faces]
+
+
+def read_trimesh(path):
+    """Read OBJ, OFF or STL through trimesh, in file order (``process=False``).
+
+    Normals are not taken from these files: the estimator's own are used. STL corners are
+    merged by exact position (see the module docstring).
+    """
+    import trimesh
+
+    mesh = trimesh.load(path, process=False, maintain_order=True, force="mesh")
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    faces = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
+    if path.lower().endswith(".stl") and len(vertices):
+        vertices, faces = _merge_exact(vertices, faces)
+    return MeshData(vertices=vertices, faces=faces if len(faces) else None, path=path)
+
+
+def read_xyz(path):
+    """Read a whitespace- or comma-separated text point cloud (.xyz, .pts).
+
+    Columns: 3 = ``x y z``; 6 = ``x y z nx ny nz``; 4 or 7 = ``x y z intensity [r g b]`` (Leica
+    PTS; the extra columns are kept in ``fields``). A first line holding a single integer (the
+    PTS point count) and ``#`` comments are skipped.
+    """
+    with open(path, "r", encoding="utf-8", errors="strict") as fh:
+        lines = [ln.split("#", 1)[0].replace(",", " ").split() for ln in fh]
+    lines = [ln for ln in lines if ln]
+    if lines and len(lines[0]) == 1 and lines[0][0].isdigit():
+        lines = lines[1:]
+    if not lines:
+        return MeshData(vertices=np.zeros((0, 3)), path=path)
+    ncol = {len(ln) for ln in lines}
+    if len(ncol) != 1:
+        raise ValueError(f"rows have different numbers of columns: {sorted(ncol)}")
+    ncol = ncol.pop()
+    if ncol not in (3, 4, 6, 7):
+        raise ValueError(f"expected 3 (x y z), 6 (x y z nx ny nz), 4 or 7 (PTS) columns, got {ncol}")
+    table = np.array(lines, dtype=np.float64)
+    data = MeshData(vertices=np.ascontiguousarray(table[:, :3]), path=path)
+    if ncol == 6:
+        data.normals = np.ascontiguousarray(table[:, 3:6])
+    elif ncol >= 4:
+        data.fields["intensity"] = table[:, 3]
+        if ncol == 7:
+            for i, c in enumerate(("red", "green", "blue")):
+                data.fields[c] = table[:, 4 + i]
+    return data
+
+
+READERS = {".ply": read_ply, ".obj": read_trimesh, ".off": read_trimesh, ".stl": read_trimesh,
+           ".xyz": read_xyz, ".pts": read_xyz}
+
+
+def register_reader(extension, reader):
+    """Register ``reader(path) -> MeshData`` for files ending in ``extension`` (e.g. ".las")."""
+    READERS[extension.lower()] = reader
+
+
+def _extension(path):
+    return os.path.splitext(str(path))[1].lower()
+
+
+def read(path):
+    """Read a mesh or point cloud; the reader is chosen by extension (see :data:`READERS`).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+
+    Returns
+    -------
+    MeshData
+        ``vertices`` (n, 3) float64 with n >= 1 and at least one finite row.
+
+    Raises
+    ------
+    MeshFileError
+        Missing, unreadable or corrupt file, unsupported extension, no vertices, no finite
+        coordinates. The message starts with the file name.
+
+    Examples
+    --------
+    >>> data = read("examples/torus.ply")              # doctest: +SKIP
+    >>> data.vertices.shape, data.faces.shape         # doctest: +SKIP
+    ((6400, 3), (12800, 3))
+    """
+    path = os.fspath(path)
+    ext = _extension(path)
+    if ext not in READERS:
+        raise MeshFileError(f"{path}: unsupported file type {ext or '(no extension)'!r}; "
+                            f"readable: {', '.join(sorted(READERS))}")
+    if not os.path.isfile(path):
+        raise MeshFileError(f"{path}: no such file")
+    try:
+        data = READERS[ext](path)
+    except MeshFileError:
+        raise
+    except (OSError, UnicodeDecodeError) as exc:
+        raise MeshFileError(f"{path}: cannot read file ({exc})") from exc
+    except Exception as exc:  # parsers raise anything on corrupt input
+        msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise MeshFileError(f"{path}: not a valid {ext[1:].upper()} file ({msg})") from exc
+    data.path = path
+    if len(data.vertices) == 0:
+        raise MeshFileError(f"{path}: the file holds no vertices")
+    if not np.isfinite(data.vertices).all(axis=1).any():
+        raise MeshFileError(f"{path}: no vertex has finite coordinates")
+    return data
+
+
+# ---------------------------------------------------------------------------------- writers
+
+def check_distinct(input_path, output_path):
+    """Raise MeshFileError if ``output_path`` names the same file as ``input_path``."""
+    same = os.path.realpath(input_path) == os.path.realpath(output_path)
+    if not same and os.path.exists(output_path) and os.path.exists(input_path):
+        same = os.path.samefile(input_path, output_path)
+    if same:
+        raise MeshFileError(f"{output_path}: refusing to overwrite the input file")
+
+
+def atomic_write(path, write_fn):
+    """Call ``write_fn(tmp_path)`` on a temporary file next to ``path``, then rename it.
+
+    Readers never see a partial file: on success the temporary file replaces ``path`` in one
+    ``os.replace``; on any failure it is removed and the exception propagates.
+    """
+    path = os.fspath(path)
+    directory = os.path.dirname(os.path.abspath(path))
+    os.makedirs(directory, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=directory, prefix="." + os.path.basename(path) + ".",
+                               suffix=".part")
+    os.close(fd)
+    try:
+        write_fn(tmp)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the usual permissions
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+        raise
+
+
+def write_ply(path, vertices, faces=None, fields=None):
+    """Write a binary little-endian PLY atomically.
+
+    Parameters
+    ----------
+    path : str
+    vertices : (n, 3) float, written as float64 ``x y z``
+    faces : (m, 3) int, optional, written as ``vertex_indices`` (uchar count, int32 indices)
+    fields : dict name -> (n,) array, optional
+        Extra vertex properties in the given order and dtype (float64, float32, int32, uint8,
+        ...); they are read back bit for bit.
+    """
+    from plyfile import PlyData, PlyElement
+
+    v = np.asarray(vertices, dtype=np.float64)
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise ValueError(f"vertices must be (n, 3), got {v.shape}")
+    fields = dict(fields or {})
+    dtype = [(c, "<f8") for c in "xyz"]
+    for name, arr in fields.items():
+        arr = np.asarray(arr)
+        if arr.shape != (len(v),):
+            raise ValueError(f"field {name!r} must have shape ({len(v)},), got {arr.shape}")
+        dtype.append((name, arr.dtype.newbyteorder("<").str))
+    table = np.empty(len(v), dtype=dtype)
+    for i, c in enumerate("xyz"):
+        table[c] = v[:, i]
+    for name, arr in fields.items():
+        table[name] = arr
+    elements = [PlyElement.describe(table, "vertex")]
+    if faces is not None:
+        f = np.asarray(faces, dtype=np.int64)
+        ftable = np.empty(len(f), dtype=[("vertex_indices", "<i4", (3,))])
+        ftable["vertex_indices"] = f
+        elements.append(PlyElement.describe(ftable, "face"))
+    ply = PlyData(elements, text=False, byte_order="<",
+                  comments=["meshcurv: principal curvatures, outward normals, convex positive"])
+    atomic_write(path, ply.write)
+
+
+def write_annotated(path, data, result, quality="mean", colormap="Turbo", clamp=2.0):
+    """Write ``data`` with the curvature ``result`` as an annotated binary PLY (atomic).
+
+    Parameters
+    ----------
+    path : str, must end in .ply
+    data : MeshData, the geometry the result was computed on
+    result : CurvatureResult, one row per vertex of ``data``
+    quality : str, default "mean"
+        Field (one of :data:`meshcurv.shape.FIELDS`) copied into ``quality`` and used for the
+        colour; invalid vertices get quality 0 and grey (the named fields keep NaN).
+    colormap, clamp : colour ramp, see :func:`meshcurv.shape.colorize`
+
+    Other per-vertex properties of the input PLY (``data.fields``) are kept unless an annotated
+    field has the same name.
+    """
+    if _extension(path) != ".ply":
+        raise MeshFileError(f"{path}: annotated output must be a .ply file")
+    if data.path:
+        check_distinct(data.path, path)
+    n = len(data.vertices)
+    if len(result.k1) != n:
+        raise ValueError(f"result has {len(result.k1)} rows for {n} vertices")
+    if quality not in shape.FIELDS:
+        raise ValueError(f"quality must be one of {', '.join(shape.FIELDS)}, got {quality!r}")
+    values = {f: getattr(result, f) for f in shape.FIELDS}
+    ours = set(_GEOMETRY) | set(_COLOR) | set(ANNOTATED_FIELDS)
+    fields = {k: v for k, v in data.fields.items() if k not in ours}
+    fields.update({"nx": result.normals[:, 0], "ny": result.normals[:, 1],
+                   "nz": result.normals[:, 2]})
+    fields.update(values)
+    fields["valid"] = result.valid.astype(np.uint8)
+    for i, c in enumerate("xyz"):
+        fields["d1" + c] = result.d1[:, i]
+    for i, c in enumerate("xyz"):
+        fields["d2" + c] = result.d2[:, i]
+    fields["n_neighbors"] = np.asarray(result.n_neighbors, dtype=np.int32)
+    fields["n_samples"] = np.asarray(result.n_samples, dtype=np.int32)
+    fields["residual"] = np.asarray(result.residual, dtype=np.float64)
+    fields["quality"] = np.where(result.valid, values[quality], 0.0)
+    rgb = shape.colorize(np.where(result.valid, values[quality], np.nan), quality, colormap, clamp)
+    for i, c in enumerate(("red", "green", "blue")):
+        fields[c] = rgb[:, i]
+    write_ply(path, data.vertices, None if data.is_point_cloud else data.faces, fields)
+
+
+WRITERS = {".ply": write_annotated}
+
+
+def register_writer(extension, writer):
+    """Register ``writer(path, data, result, quality=, colormap=, clamp=)`` for ``extension``."""
+    WRITERS[extension.lower()] = writer
+
+
+def write(path, data, result, **options):
+    """Write an annotated file; the writer is chosen by extension (see :data:`WRITERS`)."""
+    ext = _extension(path)
+    if ext not in WRITERS:
+        raise MeshFileError(f"{path}: cannot write {ext or '(no extension)'!r} files; "
+                            f"writable: {', '.join(sorted(WRITERS))}")
+    return WRITERS[ext](path, data, result, **options)

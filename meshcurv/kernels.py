@@ -1,0 +1,1151 @@
+"""Compiled numba kernels: neighbour search, local covariance, and the fused circle-fit estimator.
+
+This module is a leaf: it imports nothing from the rest of meshcurv. Every kernel works on flat
+arrays (float64 coordinates, int64 CSR neighbour lists) and loops over query points with
+``prange``; no kernel allocates per query point. The plain numpy reference of the same estimator
+lives in :mod:`meshcurv.reference` and the test-suite checks the two agree.
+"""
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+# Columns of the per-half-set accumulator (coordinates scaled by 1/radius). The CGA circle fit
+# needs B = sum w w^T over rows w = (h, -1, -r2/2): the sums of 1, h, h^2, r2, h*r2, r2^2. The
+# sums of r2*cos2phi ... tell the sine fit which blend of directions a half-set really saw (see
+# ``_sample_design``). Block U holds unit weights, block W distance weights (1 - r2)^WEIGHT_POWER;
+# W2 holds sums of squared weights for the variance of the weighted fit.
+_N, _H, _HH, _R, _HR, _RR, _RC, _RRC, _RS, _RRS = range(10)
+U = 0
+W = 10
+_W2, _W2R, _W2RR, _CNT, _EMAX = range(20, 25)
+N_ACC = 25
+WEIGHT_POWER = 2
+
+# Points per chunk handed to one thread (keeps scratch arrays per chunk, not per point).
+CHUNK = 256
+
+# Weighting modes of the circle fits.
+WEIGHTS_NONE, WEIGHTS_DISTANCE, WEIGHTS_ADAPTIVE = 0, 1, 2
+
+
+@njit(cache=True)
+def _smallest_eigvec_sym3(a11, a12, a13, a22, a23, a33, out):
+    """Unit eigenvector of the smallest eigenvalue of a symmetric 3x3 matrix; returns the eigenvalue.
+
+    Eigenvalues in closed form (trigonometric solution of the characteristic cubic), then the
+    eigenvector as the largest cross product of two rows of (A - lambda I), followed by one step
+    of inverse-free refinement (Rayleigh quotient) to recover the precision the cubic loses.
+    """
+    scale = max(abs(a11), abs(a12), abs(a13), abs(a22), abs(a23), abs(a33))
+    if scale == 0.0 or not np.isfinite(scale):
+        out[0] = np.nan
+        out[1] = np.nan
+        out[2] = np.nan
+        return np.nan
+    a11 /= scale
+    a12 /= scale
+    a13 /= scale
+    a22 /= scale
+    a23 /= scale
+    a33 /= scale
+    q = (a11 + a22 + a33) / 3.0
+    p1 = a12 * a12 + a13 * a13 + a23 * a23
+    b11 = a11 - q
+    b22 = a22 - q
+    b33 = a33 - q
+    p2 = b11 * b11 + b22 * b22 + b33 * b33 + 2.0 * p1
+    p = math.sqrt(p2 / 6.0)
+    if p == 0.0:
+        out[0] = 1.0
+        out[1] = 0.0
+        out[2] = 0.0
+        return q * scale
+    det = (b11 * (b22 * b33 - a23 * a23) - a12 * (a12 * b33 - a23 * a13)
+           + a13 * (a12 * a23 - b22 * a13)) / (p * p * p)
+    r = min(max(det / 2.0, -1.0), 1.0)
+    phi = math.acos(r) / 3.0
+    lam = q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0)
+    best = -1.0
+    for it in range(2):
+        # rows of A - lam I
+        r0x, r0y, r0z = a11 - lam, a12, a13
+        r1x, r1y, r1z = a12, a22 - lam, a23
+        r2x, r2y, r2z = a13, a23, a33 - lam
+        best = -1.0
+        vx = vy = vz = 0.0
+        cx = r0y * r1z - r0z * r1y
+        cy = r0z * r1x - r0x * r1z
+        cz = r0x * r1y - r0y * r1x
+        nrm = cx * cx + cy * cy + cz * cz
+        if nrm > best:
+            best, vx, vy, vz = nrm, cx, cy, cz
+        cx = r0y * r2z - r0z * r2y
+        cy = r0z * r2x - r0x * r2z
+        cz = r0x * r2y - r0y * r2x
+        nrm = cx * cx + cy * cy + cz * cz
+        if nrm > best:
+            best, vx, vy, vz = nrm, cx, cy, cz
+        cx = r1y * r2z - r1z * r2y
+        cy = r1z * r2x - r1x * r2z
+        cz = r1x * r2y - r1y * r2x
+        nrm = cx * cx + cy * cy + cz * cz
+        if nrm > best:
+            best, vx, vy, vz = nrm, cx, cy, cz
+        if best <= 0.0:
+            break
+        inv = 1.0 / math.sqrt(best)
+        vx *= inv
+        vy *= inv
+        vz *= inv
+        out[0] = vx
+        out[1] = vy
+        out[2] = vz
+        # Rayleigh quotient of the current vector: a more precise eigenvalue for the second pass.
+        lam = (vx * (a11 * vx + a12 * vy + a13 * vz) + vy * (a12 * vx + a22 * vy + a23 * vz)
+               + vz * (a13 * vx + a23 * vy + a33 * vz))
+    if best <= 0.0:
+        # (A - lam I) has rank < 2: a repeated smallest eigenvalue; any vector orthogonal to a
+        # non-zero row spans the eigenspace. Pick the one closest to e1 for determinism.
+        out[0] = 1.0
+        out[1] = 0.0
+        out[2] = 0.0
+    return lam * scale
+
+
+@njit(cache=True)
+def _tangent_frame(points, nbr, lo, hi, x, n, r2max, tu, tv):
+    """Tangent frame (tu, tv, n) that rotates with the data.
+
+    tu is the tangential part of the offset to the first neighbour (in list order) lying at least
+    30 degrees off the normal, so the frame - and with it the sampling planes - is equivariant
+    under rotation, translation and scaling. Falls back to a fixed frame if there is none.
+    """
+    found = False
+    for j in range(lo, hi):
+        k = nbr[j]
+        qx = points[k, 0] - x[0]
+        qy = points[k, 1] - x[1]
+        qz = points[k, 2] - x[2]
+        if qx * qx + qy * qy + qz * qz > r2max:
+            continue
+        hq = qx * n[0] + qy * n[1] + qz * n[2]
+        ux = qx - hq * n[0]
+        uy = qy - hq * n[1]
+        uz = qz - hq * n[2]
+        t2 = ux * ux + uy * uy + uz * uz
+        if t2 > 0.25 * (t2 + hq * hq) and t2 > 0.0:
+            s = 1.0 / math.sqrt(t2)
+            tu[0] = ux * s
+            tu[1] = uy * s
+            tu[2] = uz * s
+            found = True
+            break
+    if not found:
+        # any unit vector orthogonal to n
+        if abs(n[0]) < 0.9:
+            ax, ay, az = 1.0, 0.0, 0.0
+        else:
+            ax, ay, az = 0.0, 1.0, 0.0
+        d = ax * n[0] + ay * n[1] + az * n[2]
+        ux = ax - d * n[0]
+        uy = ay - d * n[1]
+        uz = az - d * n[2]
+        s = 1.0 / math.sqrt(ux * ux + uy * uy + uz * uz)
+        tu[0] = ux * s
+        tu[1] = uy * s
+        tu[2] = uz * s
+    tv[0] = n[1] * tu[2] - n[2] * tu[1]
+    tv[1] = n[2] * tu[0] - n[0] * tu[2]
+    tv[2] = n[0] * tu[1] - n[1] * tu[0]
+
+
+@njit(cache=True)
+def _solve_sym(m, rhs, npar, sol):
+    """Solve the small symmetric positive system m @ sol = rhs by Cholesky; False if singular."""
+    # in place copy-free Cholesky on a (npar, npar) scratch held in m
+    for i in range(npar):
+        for j in range(i + 1):
+            s = m[i, j]
+            for k in range(j):
+                s -= m[i, k] * m[j, k]
+            if i == j:
+                if s <= 1e-12 * max(1.0, abs(m[i, i])):
+                    return False
+                m[i, i] = math.sqrt(s)
+            else:
+                m[i, j] = s / m[j, j]
+    for i in range(npar):
+        s = rhs[i]
+        for k in range(i):
+            s -= m[i, k] * sol[k]
+        sol[i] = s / m[i, i]
+    for i in range(npar - 1, -1, -1):
+        s = sol[i]
+        for k in range(i + 1, npar):
+            s -= m[k, i] * sol[k]
+        sol[i] = s / m[i, i]
+    return True
+
+
+@njit(cache=True)
+def _sample_design(acc, k, b, corrected, theta):
+    """Regressors (cos 2theta, sin 2theta) of one circle-fit sample for the Euler model.
+
+    Nominally the sample's plane direction theta. With ``corrected`` they are the cos/sin 2phi
+    of the half-set's own points, averaged with the weights the circle fit gives them: to first
+    order in the heights, the fitted curvature is sum_p w_p k(phi_p) / sum_p w_p with
+    w_p = r2_p (r2_p - mean r2), so a slab of finite width samples a known blend of directions
+    rather than theta alone, and the Euler model can be fitted to that blend exactly.
+    ``b`` is the accumulator block (U or W).
+    """
+    if not corrected:
+        return math.cos(2.0 * theta), math.sin(2.0 * theta)
+    rbar = acc[k, b + _R] / acc[k, b + _N]
+    den = acc[k, b + _RR] - rbar * acc[k, b + _R]
+    if den <= 0.0:
+        return math.cos(2.0 * theta), math.sin(2.0 * theta)
+    mc = (acc[k, b + _RRC] - rbar * acc[k, b + _RC]) / den
+    ms = (acc[k, b + _RRS] - rbar * acc[k, b + _RS]) / den
+    return mc, ms
+
+
+@njit(cache=True)
+def _circle_fit(acc, k, b, unit_norm, ev):
+    """CGA circle fit of half-set k from accumulator block b: (kappa, squared height residuals).
+
+    B = [[Shh, -Sh, -Shr/2], [-Sh, N, Sr/2], [-Shr/2, Sr/2, Srr/4]] and the sphere is
+    t = (t1, t2, t3) with kappa = -t3 / t1 (scaled units). ``unit_norm`` minimises t^T B t over
+    |t| = 1 (the paper: smallest eigenvector). Otherwise over t1 = 1, the generalised
+    eigenproblem B t = lambda diag(1, 0, 0) t, i.e. the 2x2 system
+    [[N, Sr/2], [Sr/2, Srr/4]] (t2, t3) = (Sh, Shr/2): the same sphere on exact data, but it
+    cannot drift to the spheres centred at x (t1 -> 0) that send |kappa| to infinity under noise.
+    The residual is in height units squared (P.S = t1 * height residual). NaN if degenerate.
+    """
+    b11 = acc[k, b + _HH]
+    b12 = -acc[k, b + _H]
+    b13 = -0.5 * acc[k, b + _HR]
+    b22 = acc[k, b + _N]
+    b23 = 0.5 * acc[k, b + _R]
+    b33 = 0.25 * acc[k, b + _RR]
+    if unit_norm:
+        lam = _smallest_eigvec_sym3(b11, b12, b13, b22, b23, b33, ev)
+        if not (abs(ev[0]) > 1e-12 * abs(ev[2])) or not np.isfinite(lam):
+            return np.nan, np.nan
+        return -ev[2] / ev[0], max(lam, 0.0) / (ev[0] * ev[0])
+    det = b22 * b33 - b23 * b23
+    if not det > 1e-14 * b22 * b33:
+        return np.nan, np.nan
+    t2 = (-b12 * b33 + b13 * b23) / det
+    t3 = (-b13 * b22 + b12 * b23) / det
+    ss = b11 + b12 * t2 + b13 * t3  # minimum of t^T B t at t1 = 1
+    return -t3, max(ss, 0.0)
+
+
+@njit(cache=True)
+def _euler_fit(rows, kappa, active, m, npar, mat, rhs, sol):
+    """Least-squares Euler model over the active samples; sol[:npar]. False if ill-posed."""
+    for a in range(npar):
+        rhs[a] = 0.0
+        for c in range(npar):
+            mat[a, c] = 0.0
+    used = 0
+    for s in range(m):
+        if active[s] == 0.0:
+            continue
+        used += 1
+        for a in range(npar):
+            rhs[a] += rows[s, a] * kappa[s]
+            for c in range(npar):
+                mat[a, c] += rows[s, a] * rows[s, c]
+    if used < npar + 2:
+        return False
+    return _solve_sym(mat, rhs, npar, sol)
+
+
+@njit(cache=True)
+def _model(rows, s, npar, sol):
+    f = 0.0
+    for a in range(npar):
+        f += rows[s, a] * sol[a]
+    return f
+
+
+@njit(cache=True)
+def _estimate_one(points, nbr, lo, hi, x, n, radius, ndir, slab, min_points, min_spread,
+                  weighting, unit_norm, corrected, half_frequency, robust,
+                  ca, sa, acc, kap_u, kap_w, rows_u, rows_w, var_u, var_w, active, scratch,
+                  mat, rhs, sol_u, sol_w, ev, tu, tv, res):
+    """Circle fits in 2*ndir half-sets around one point, then the Euler model fit.
+
+    Writes (k1, k2, theta1, n_used_samples, residual_rms, n_neighbours, noise) into ``res`` and
+    the frame into tu, tv. Lengths inside are in units of ``radius``.
+
+    With adaptive weighting both an unweighted and a distance-weighted estimate are made from
+    the same points. The weighted one has less model bias, the unweighted one less noise. Their
+    difference D is noise plus bias difference; under noise alone its variance is
+    Var(weighted) - Var(unweighted) (the unweighted fit is the efficient one), predicted from
+    the height noise measured by the circle-fit residuals. The result moves from the
+    unweighted towards the weighted estimate by alpha = max(0, 1 - Var(D) / |D|^2): all the way
+    on clean data, not at all where D is explained by noise.
+    """
+    nh = 2 * ndir
+    for k in range(nh):
+        for c in range(N_ACC):
+            acc[k, c] = 0.0
+    for a in range(7):
+        res[a] = np.nan
+    res[3] = 0.0
+    res[5] = 0.0
+    inv_r = 1.0 / radius
+    r2max = radius * radius
+    _tangent_frame(points, nbr, lo, hi, x, n, r2max, tu, tv)
+    n_nbr = 0
+    for j in range(lo, hi):
+        kk = nbr[j]
+        qx = points[kk, 0] - x[0]
+        qy = points[kk, 1] - x[1]
+        qz = points[kk, 2] - x[2]
+        d2 = qx * qx + qy * qy + qz * qz
+        if not (d2 > 0.0 and d2 <= r2max):
+            continue
+        n_nbr += 1
+        qx *= inv_r
+        qy *= inv_r
+        qz *= inv_r
+        u = qx * tu[0] + qy * tu[1] + qz * tu[2]
+        v = qx * tv[0] + qy * tv[1] + qz * tv[2]
+        h = qx * n[0] + qy * n[1] + qz * n[2]
+        r2 = d2 * inv_r * inv_r
+        t2 = u * u + v * v
+        if t2 <= 0.0:
+            continue
+        w = (1.0 - r2) ** WEIGHT_POWER
+        c2 = (u * u - v * v) / t2
+        s2 = 2.0 * u * v / t2
+        for i in range(ndir):
+            if abs(-sa[i] * u + ca[i] * v) > slab:
+                continue
+            e = ca[i] * u + sa[i] * v
+            k = i if e >= 0.0 else i + ndir
+            for b in (U, W):
+                wb = 1.0 if b == U else w
+                acc[k, b + _N] += wb
+                acc[k, b + _H] += wb * h
+                acc[k, b + _HH] += wb * h * h
+                acc[k, b + _R] += wb * r2
+                acc[k, b + _HR] += wb * h * r2
+                acc[k, b + _RR] += wb * r2 * r2
+                acc[k, b + _RC] += wb * r2 * c2
+                acc[k, b + _RRC] += wb * r2 * r2 * c2
+                acc[k, b + _RS] += wb * r2 * s2
+                acc[k, b + _RRS] += wb * r2 * r2 * s2
+            acc[k, _W2] += w * w
+            acc[k, _W2R] += w * w * r2
+            acc[k, _W2RR] += w * w * r2 * r2
+            acc[k, _CNT] += 1.0
+            if abs(e) > acc[k, _EMAX]:
+                acc[k, _EMAX] = abs(e)
+    res[5] = n_nbr
+
+    # circle fits per half-set; x itself is the row (0, -1, 0) with weight 1
+    m = 0
+    planes_seen = 0
+    noise_ss = 0.0
+    noise_dof = 0.0
+    for i in range(ndir):
+        seen = False
+        for side in range(2):
+            k = i + side * ndir
+            if acc[k, _CNT] < min_points or acc[k, _EMAX] < min_spread:
+                continue
+            acc[k, U + _N] += 1.0
+            acc[k, W + _N] += 1.0
+            acc[k, _W2] += 1.0
+            ku, ssu = _circle_fit(acc, k, U, unit_norm, ev)
+            kw, ssw = _circle_fit(acc, k, W, unit_norm, ev)
+            if not (np.isfinite(ku) and np.isfinite(kw)):
+                continue
+            theta = math.atan2(sa[i], ca[i]) + side * math.pi
+            kap_u[m] = ku
+            kap_w[m] = kw
+            for rows, b in ((rows_u, U), (rows_w, W)):
+                dc, ds = _sample_design(acc, k, b, corrected, theta)
+                rows[m, 0] = 1.0
+                rows[m, 1] = dc
+                rows[m, 2] = ds
+                rows[m, 3] = math.cos(theta)
+                rows[m, 4] = math.sin(theta)
+            # Var(kappa) / sigma^2 of the two fits, linearised as h = kappa r2 / 2 + c:
+            # 4 / sum (r2 - rbar)^2 unweighted, 4 sum w^2 (r2 - rbar_w)^2 / (sum w (r2 - rbar_w)^2)^2
+            nu = acc[k, U + _N]
+            su = acc[k, U + _RR] - acc[k, U + _R] ** 2 / nu
+            nw = acc[k, W + _N]
+            rbw = acc[k, W + _R] / nw
+            sw = acc[k, W + _RR] - acc[k, W + _R] * rbw
+            sw2 = acc[k, _W2RR] - 2.0 * rbw * acc[k, _W2R] + rbw * rbw * acc[k, _W2]
+            var_u[m] = 4.0 / su if su > 0.0 else np.inf
+            var_w[m] = 4.0 * sw2 / (sw * sw) if sw > 0.0 else np.inf
+            active[m] = 1.0
+            if nu > 3.0:
+                noise_ss += ssu
+                noise_dof += nu - 3.0
+            m += 1
+            seen = True
+        if seen:
+            planes_seen += 1
+    res[3] = m
+    if planes_seen < 3 or m < 5:
+        return
+    npar = 5 if half_frequency else 3
+    if not _euler_fit(rows_u, kap_u, active, m, npar, mat, rhs, sol_u):
+        return
+    if robust:
+        # drop samples further than 3 robust sigmas (MAD) from the model, then refit
+        for s in range(m):
+            r = abs(kap_u[s] - _model(rows_u, s, npar, sol_u))
+            j = s
+            while j > 0 and scratch[j - 1] > r:
+                scratch[j] = scratch[j - 1]
+                j -= 1
+            scratch[j] = r
+        med = scratch[(m - 1) // 2] if m % 2 == 1 else 0.5 * (scratch[m // 2 - 1] + scratch[m // 2])
+        cut = 3.0 * 1.4826 * med
+        changed = False
+        if cut > 0.0:
+            for s in range(m):
+                if abs(kap_u[s] - _model(rows_u, s, npar, sol_u)) > cut:
+                    active[s] = 0.0
+                    changed = True
+        if changed and not _euler_fit(rows_u, kap_u, active, m, npar, mat, rhs, sol_u):
+            return
+    used = 0
+    sse = 0.0
+    vu = 0.0
+    vw = 0.0
+    for s in range(m):
+        if active[s] != 0.0:
+            used += 1
+            sse += (kap_u[s] - _model(rows_u, s, npar, sol_u)) ** 2
+            vu += var_u[s]
+            vw += var_w[s]
+    sigma2 = noise_ss / noise_dof if noise_dof > 0.0 else 0.0
+    alpha = 0.0
+    if weighting != WEIGHTS_NONE:
+        if _euler_fit(rows_w, kap_w, active, m, npar, mat, rhs, sol_w):
+            alpha = 1.0
+            if weighting == WEIGHTS_ADAPTIVE:
+                # parameter variances ~ mean sample variance * (1 + 2 + 2) / used for (A, B, C)
+                var_d = max(sigma2 * 30.0 * (vw - vu) / (used * used), 0.0)
+                dd = 0.0
+                for a in range(3):
+                    dd += (sol_w[a] - sol_u[a]) ** 2
+                alpha = max(0.0, 1.0 - var_d / dd) if dd > 0.0 else 1.0
+    a0 = sol_u[0] + alpha * (sol_w[0] - sol_u[0])
+    bb = sol_u[1] + alpha * (sol_w[1] - sol_u[1])
+    cc = sol_u[2] + alpha * (sol_w[2] - sol_u[2])
+    amp = math.sqrt(bb * bb + cc * cc)
+    res[0] = (a0 + amp) * inv_r
+    res[1] = (a0 - amp) * inv_r
+    res[2] = 0.5 * math.atan2(cc, bb)
+    res[3] = used
+    res[4] = math.sqrt(sse / used) * inv_r
+    res[6] = math.sqrt(sigma2) * radius
+
+
+@njit(parallel=True, cache=True)
+def curvature_cga(points, query_points, query_normals, indptr, indices, radius, ndir, slab,
+                  min_points, min_spread, weighting, unit_norm, corrected, half_frequency,
+                  robust, k1, k2, d1, d2, n_samples, residual, n_neighbors, noise):
+    """Fused CGA circle-fit estimator over query points with CSR neighbour lists.
+
+    Parameters
+    ----------
+    points : (n, 3) float64, the neighbour set
+    query_points, query_normals : (m, 3) float64, where to estimate and the unit normals there
+    indptr, indices : CSR lists into ``points``: neighbours of query q are
+        ``indices[indptr[q]:indptr[q+1]]`` (the query point itself may be present; coincident
+        points are skipped)
+    radius : float, model units; slab, min_spread : fractions of ``radius``
+    weighting : WEIGHTS_NONE, WEIGHTS_DISTANCE or WEIGHTS_ADAPTIVE
+    unit_norm : bool, circle fits normalised by |t| = 1 (the paper) instead of t1 = 1
+    Outputs k1, k2 (m,), d1, d2 (m, 3), n_samples, residual, n_neighbors, noise (m,) are written
+    in place; NaN where no estimate is possible.
+    """
+    m = query_points.shape[0]
+    nh = 2 * ndir
+    ca = np.empty(ndir)
+    sa = np.empty(ndir)
+    for i in range(ndir):
+        ca[i] = math.cos(i * math.pi / ndir)
+        sa[i] = math.sin(i * math.pi / ndir)
+    nchunks = (m + CHUNK - 1) // CHUNK
+    for c in prange(nchunks):
+        acc = np.empty((nh, N_ACC))
+        kap_u = np.empty(nh)
+        kap_w = np.empty(nh)
+        rows_u = np.empty((nh, 5))
+        rows_w = np.empty((nh, 5))
+        var_u = np.empty(nh)
+        var_w = np.empty(nh)
+        active = np.empty(nh)
+        scratch = np.empty(nh)
+        mat = np.empty((5, 5))
+        rhs = np.empty(5)
+        sol_u = np.empty(5)
+        sol_w = np.empty(5)
+        ev = np.empty(3)
+        tu = np.empty(3)
+        tv = np.empty(3)
+        res = np.empty(7)
+        x = np.empty(3)
+        n = np.empty(3)
+        for q in range(c * CHUNK, min(m, (c + 1) * CHUNK)):
+            for a in range(3):
+                x[a] = query_points[q, a]
+                n[a] = query_normals[q, a]
+            nn = math.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
+            if nn > 0.0 and np.isfinite(nn) and np.isfinite(x[0] + x[1] + x[2]):
+                for a in range(3):
+                    n[a] /= nn
+                _estimate_one(points, indices, indptr[q], indptr[q + 1], x, n, radius, ndir,
+                              slab, min_points, min_spread, weighting, unit_norm, corrected,
+                              half_frequency, robust, ca, sa, acc, kap_u, kap_w, rows_u, rows_w, var_u, var_w,
+                              active, scratch, mat, rhs, sol_u, sol_w, ev, tu, tv, res)
+            else:
+                for a in range(7):
+                    res[a] = np.nan
+                res[3] = 0.0
+                res[5] = 0.0
+            n_samples[q] = res[3]
+            residual[q] = res[4]
+            n_neighbors[q] = res[5]
+            noise[q] = res[6]
+            if np.isfinite(res[0]):
+                k1[q] = res[0]
+                k2[q] = res[1]
+                ct = math.cos(res[2])
+                st = math.sin(res[2])
+                for a in range(3):
+                    d1[q, a] = ct * tu[a] + st * tv[a]
+                d2[q, 0] = n[1] * d1[q, 2] - n[2] * d1[q, 1]
+                d2[q, 1] = n[2] * d1[q, 0] - n[0] * d1[q, 2]
+                d2[q, 2] = n[0] * d1[q, 1] - n[1] * d1[q, 0]
+            else:
+                k1[q] = np.nan
+                k2[q] = np.nan
+                for a in range(3):
+                    d1[q, a] = np.nan
+                    d2[q, a] = np.nan
+
+
+@njit(parallel=True, cache=True)
+def kring_ball_csr(adj_ptr, adj_idx, points, query, radius, nthreads):
+    """Neighbours of each query vertex reachable over mesh edges without leaving the ball.
+
+    Breadth-first search from the query vertex over the edge graph (``adj_ptr``, ``adj_idx``,
+    CSR), expanding only through vertices within Euclidean ``radius`` of it: a connected,
+    radius-limited k-ring that cannot jump across a thin sheet. Returns CSR (indptr, indices)
+    with the query vertex itself excluded. Two passes: count, then fill. ``nthreads`` visited-
+    stamp arrays of length n are allocated (one per thread, not per vertex).
+    """
+    m = query.shape[0]
+    n = points.shape[0]
+    r2max = radius * radius
+    counts = np.zeros(m + 1, dtype=np.int64)
+    nthreads = max(1, min(m, nthreads))
+    per = (m + nthreads - 1) // nthreads
+    for pss in range(2):
+        if pss == 1:
+            for i in range(m):
+                counts[i + 1] += counts[i]
+            indices = np.empty(counts[m], dtype=np.int64)
+        else:
+            indices = np.empty(0, dtype=np.int64)
+        for t in prange(nthreads):
+            stamp = np.full(n, -1, dtype=np.int64)
+            queue = np.empty(n, dtype=np.int32)
+            for qi in range(t * per, min(m, (t + 1) * per)):
+                s = query[qi]
+                x0 = points[s, 0]
+                x1 = points[s, 1]
+                x2 = points[s, 2]
+                if not np.isfinite(x0 + x1 + x2):
+                    continue
+                stamp[s] = qi
+                head = 0
+                tail = 1
+                queue[0] = s
+                found = 0
+                base = counts[qi] if pss == 1 else 0
+                while head < tail:
+                    a = queue[head]
+                    head += 1
+                    for e in range(adj_ptr[a], adj_ptr[a + 1]):
+                        b = adj_idx[e]
+                        if stamp[b] == qi:
+                            continue
+                        stamp[b] = qi
+                        d0 = points[b, 0] - x0
+                        d1 = points[b, 1] - x1
+                        d2 = points[b, 2] - x2
+                        if d0 * d0 + d1 * d1 + d2 * d2 <= r2max:
+                            queue[tail] = b
+                            tail += 1
+                            if pss == 1:
+                                indices[base + found] = b
+                            found += 1
+                if pss == 0:
+                    counts[qi + 1] = found
+    return counts, indices
+
+
+@njit(parallel=True, cache=True)
+def local_covariance(points, query_points, indptr, indices, radius):
+    """Covariance (m, 3, 3) of each query point's neighbours within ``radius`` (point included).
+
+    Accumulated about the query point and corrected to the centroid, in units of ``radius`` so
+    that translation by large offsets does not cost precision. Also returns the counts.
+    """
+    m = query_points.shape[0]
+    cov = np.zeros((m, 3, 3))
+    cnt = np.zeros(m, dtype=np.int64)
+    r2max = radius * radius
+    inv_r = 1.0 / radius
+    for q in prange(m):
+        x0 = query_points[q, 0]
+        x1 = query_points[q, 1]
+        x2 = query_points[q, 2]
+        s0 = s1 = s2 = 0.0
+        s00 = s01 = s02 = s11 = s12 = s22 = 0.0
+        c = 1
+        for j in range(indptr[q], indptr[q + 1]):
+            k = indices[j]
+            a = points[k, 0] - x0
+            b = points[k, 1] - x1
+            d = points[k, 2] - x2
+            dd = a * a + b * b + d * d
+            if not (dd > 0.0 and dd <= r2max):
+                continue
+            a *= inv_r
+            b *= inv_r
+            d *= inv_r
+            c += 1
+            s0 += a
+            s1 += b
+            s2 += d
+            s00 += a * a
+            s01 += a * b
+            s02 += a * d
+            s11 += b * b
+            s12 += b * d
+            s22 += d * d
+        m0 = s0 / c
+        m1 = s1 / c
+        m2 = s2 / c
+        cov[q, 0, 0] = s00 / c - m0 * m0
+        cov[q, 0, 1] = s01 / c - m0 * m1
+        cov[q, 0, 2] = s02 / c - m0 * m2
+        cov[q, 1, 1] = s11 / c - m1 * m1
+        cov[q, 1, 2] = s12 / c - m1 * m2
+        cov[q, 2, 2] = s22 / c - m2 * m2
+        cov[q, 1, 0] = cov[q, 0, 1]
+        cov[q, 2, 0] = cov[q, 0, 2]
+        cov[q, 2, 1] = cov[q, 1, 2]
+        cnt[q] = c
+    return cov, cnt
+
+
+@njit(cache=True)
+def propagate_signs(order, predecessors, normals):
+    """Flip normals along a spanning-tree traversal so that each agrees with its parent.
+
+    ``order`` is a breadth-first order of the tree and ``predecessors`` the parent of each
+    vertex (negative for roots). ``normals`` (n, 3) is modified in place.
+    """
+    for i in order:
+        p = predecessors[i]
+        if p < 0:
+            continue
+        d = normals[i, 0] * normals[p, 0] + normals[i, 1] * normals[p, 1] + normals[i, 2] * normals[p, 2]
+        if d < 0.0:
+            normals[i, 0] = -normals[i, 0]
+            normals[i, 1] = -normals[i, 1]
+            normals[i, 2] = -normals[i, 2]
+
+
+# ---------------------------------------------------------------------------------------------
+# Neighbour search and plumbing kernels (speed; see scripts/bench.py).
+#
+# The CSR builders below make one search per query point: each thread writes its (contiguous)
+# range of queries as one stream into its own slice of an int32 scratch buffer, sized from a
+# sample of the queries; a thread whose stream overflows searches its range again, straight
+# into the output. Output order is the order a query's neighbours are found in.
+
+
+@njit(cache=True)
+def edge_adjacency_csr(faces, n):
+    """Undirected edge graph of a triangle mesh as CSR ``(indptr, indices)``, sorted, unique.
+
+    Every face contributes its three edges in both directions (self-loops of degenerate faces
+    are dropped); each vertex's row is then sorted and deduplicated in place.
+    """
+    m = faces.shape[0]
+    start = np.zeros(n + 1, dtype=np.int64)
+    for f in range(m):
+        for c in range(3):
+            a = faces[f, c]
+            b = faces[f, (c + 1) % 3]
+            if a != b:
+                start[a + 1] += 1
+                start[b + 1] += 1
+    for i in range(n):
+        start[i + 1] += start[i]
+    fill = start[:n].copy()
+    idx = np.empty(start[n], dtype=np.int64)
+    for f in range(m):
+        for c in range(3):
+            a = faces[f, c]
+            b = faces[f, (c + 1) % 3]
+            if a != b:
+                idx[fill[a]] = b
+                fill[a] += 1
+                idx[fill[b]] = a
+                fill[b] += 1
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    out = 0
+    for i in range(n):
+        lo = start[i]
+        hi = start[i + 1]
+        # insertion sort: rows hold ~12 entries
+        for j in range(lo + 1, hi):
+            key = idx[j]
+            k = j - 1
+            while k >= lo and idx[k] > key:
+                idx[k + 1] = idx[k]
+                k -= 1
+            idx[k + 1] = key
+        # compaction never overtakes the unsorted rows ahead: out <= lo
+        prev = -1
+        for j in range(lo, hi):
+            if idx[j] != prev:
+                prev = idx[j]
+                idx[out] = prev
+                out += 1
+        indptr[i + 1] = out
+    return indptr, idx[:out].copy()
+
+
+@njit(cache=True)
+def _kring_one(adj_ptr, adj_idx, points, s, tag, r2max, stamp, queue, out, base, limit):
+    """Breadth-first, radius-limited k-ring of vertex ``s``; see :func:`kring_ball_csr`.
+
+    Writes the neighbours found to ``out[base:]`` as long as they fit below ``limit`` and returns
+    how many there are (so a caller can detect an overflow). ``stamp`` marks visited vertices
+    with ``tag``, a value unique to this search.
+    """
+    x0 = points[s, 0]
+    x1 = points[s, 1]
+    x2 = points[s, 2]
+    if not np.isfinite(x0 + x1 + x2):
+        return 0
+    stamp[s] = tag
+    head = 0
+    tail = 1
+    queue[0] = s
+    found = 0
+    while head < tail:
+        a = queue[head]
+        head += 1
+        for e in range(adj_ptr[a], adj_ptr[a + 1]):
+            b = adj_idx[e]
+            if stamp[b] == tag:
+                continue
+            stamp[b] = tag
+            d0 = points[b, 0] - x0
+            d1 = points[b, 1] - x1
+            d2 = points[b, 2] - x2
+            if d0 * d0 + d1 * d1 + d2 * d2 <= r2max:
+                queue[tail] = b
+                tail += 1
+                if base + found < limit:
+                    out[base + found] = b
+                found += 1
+    return found
+
+
+@njit(parallel=True, cache=True)
+def kring_ball_csr_fast(adj_ptr, adj_idx, points, query, radius, stamp, queue, tag0):
+    """Radius-limited k-ring CSR lists, one breadth-first search per query vertex.
+
+    Same output as :func:`kring_ball_csr` (query vertex excluded, breadth-first order), at about
+    half the cost: each thread streams its results into an int32 scratch sized from a sample
+    of 64 queries, copied once; a thread whose stream overflows searches its range again.
+    ``stamp`` (threads, n) int64 and ``queue`` (threads, n) int32 are reusable work arrays
+    (``stamp`` starts at -1); ``tag0`` is an offset that makes this call's stamps unique: pass
+    a different ``tag0`` per call (e.g. the position of the block) and ``tag0 + len(query)``
+    below 2**60.
+    """
+    m = query.shape[0]
+    r2max = radius * radius
+    counts = np.zeros(m + 1, dtype=np.int64)
+    nthreads = max(1, min(m, stamp.shape[0]))
+    per = (m + nthreads - 1) // nthreads
+    # stamps 3 * (tag0 + qi) + {0: sample, 1: stream, 2: repeat} are unique across uses
+    dummy = np.empty(0, dtype=np.int32)
+    step = max(1, m // 64)
+    tot = 0
+    cnt = 0
+    for qi in range(0, m, step):
+        tot += _kring_one(adj_ptr, adj_idx, points, query[qi], 3 * (tag0 + qi), r2max,
+                          stamp[0], queue[0], dummy, 0, 0)
+        cnt += 1
+    cap = 16 + (3 * tot) // (2 * max(cnt, 1))
+    buf = np.empty(nthreads * per * cap, dtype=np.int32)
+    used = np.zeros(nthreads, dtype=np.int64)
+    for t in prange(nthreads):
+        lo = t * per * cap
+        limit = lo + per * cap
+        pos = lo
+        for qi in range(t * per, min(m, (t + 1) * per)):
+            f = _kring_one(adj_ptr, adj_idx, points, query[qi], 3 * (tag0 + qi) + 1, r2max,
+                           stamp[t], queue[t], buf, pos, limit)
+            counts[qi + 1] = f
+            pos += f
+        used[t] = pos - lo
+    for i in range(m):
+        counts[i + 1] += counts[i]
+    indices = np.empty(counts[m], dtype=np.int64)
+    for t in prange(nthreads):
+        q0 = t * per
+        q1 = min(m, (t + 1) * per)
+        if used[t] <= per * cap:
+            lo = t * per * cap
+            o = counts[min(q0, m)]
+            for j in range(used[t]):
+                indices[o + j] = buf[lo + j]
+        else:
+            for qi in range(q0, q1):
+                _kring_one(adj_ptr, adj_idx, points, query[qi], 3 * (tag0 + qi) + 2, r2max,
+                           stamp[t], queue[t], indices, counts[qi], counts[qi + 1])
+    return counts, indices
+
+
+# Grid keys pack three cell coordinates modulo 2**21; a hash table maps keys to cells. Cells a
+# multiple of 2**21 apart share a key: they merge into one bucket, which costs a few distance
+# tests where it happens (a far outlier) but loses nothing.
+_GRID_BITS = 21
+_GRID_MASK = (1 << 21) - 1
+
+
+@njit(cache=True)
+def _grid_key(cx, cy, cz):
+    return (((cx & _GRID_MASK) << (2 * _GRID_BITS)) | ((cy & _GRID_MASK) << _GRID_BITS)
+            | (cz & _GRID_MASK))
+
+
+@njit(cache=True)
+def _hash_slot(key, mask):
+    h = (key * 0x9E3779B97F4A7C15) & 0x7FFFFFFFFFFFFFFF
+    return (h >> 17) & mask
+
+
+@njit(cache=True)
+def grid_build(points, finite_index, origin, cell):
+    """Uniform grid over ``points[finite_index]`` with cells of edge ``cell``.
+
+    Returns ``(order, cell_start, table_keys, table_cells)``: ``order`` lists the point
+    indices cell by cell (ascending within a cell), cell ``c`` holds
+    ``order[cell_start[c]:cell_start[c + 1]]``, and the open-addressing hash table
+    ``table_keys``/``table_cells`` (-1 = empty) maps packed cell keys to cells.
+    """
+    k = finite_index.shape[0]
+    keys = np.empty(k, dtype=np.int64)
+    inv = 1.0 / cell
+    for j in range(k):
+        i = finite_index[j]
+        cx = np.int64(math.floor((points[i, 0] - origin[0]) * inv))
+        cy = np.int64(math.floor((points[i, 1] - origin[1]) * inv))
+        cz = np.int64(math.floor((points[i, 2] - origin[2]) * inv))
+        keys[j] = _grid_key(cx, cy, cz)
+    srt = np.argsort(keys, kind="mergesort")  # stable: ascending point index within a cell
+    order = finite_index[srt]
+    ncell = 0
+    for j in range(k):
+        if j == 0 or keys[srt[j]] != keys[srt[j - 1]]:
+            ncell += 1
+    cell_start = np.empty(ncell + 1, dtype=np.int64)
+    size = 16
+    while size < 2 * ncell:
+        size *= 2
+    mask = size - 1
+    table_keys = np.full(size, -1, dtype=np.int64)
+    table_cells = np.full(size, -1, dtype=np.int64)
+    c = -1
+    for j in range(k):
+        key = keys[srt[j]]
+        if j == 0 or key != keys[srt[j - 1]]:
+            c += 1
+            cell_start[c] = j
+            slot = _hash_slot(key, mask)
+            while table_keys[slot] != -1:
+                slot = (slot + 1) & mask
+            table_keys[slot] = key
+            table_cells[slot] = c
+    cell_start[ncell] = k
+    return order, cell_start, table_keys, table_cells
+
+
+@njit(cache=True)
+def _grid_ball_one(points, order, cell_start, table_keys, table_cells, origin, inv, x0, x1, x2,
+                   r2max, out, base, limit):
+    """Indices of the grid points within ``sqrt(r2max)`` of (x0, x1, x2), ascending.
+
+    Writes to ``out[base:]`` as far as ``limit`` allows (sorted only if all fit) and returns
+    the count.
+    """
+    if not np.isfinite(x0 + x1 + x2):
+        return 0
+    mask = table_keys.shape[0] - 1
+    cx = np.int64(math.floor((x0 - origin[0]) * inv))
+    cy = np.int64(math.floor((x1 - origin[1]) * inv))
+    cz = np.int64(math.floor((x2 - origin[2]) * inv))
+    found = 0
+    for ax in range(cx - 1, cx + 2):
+        for ay in range(cy - 1, cy + 2):
+            for az in range(cz - 1, cz + 2):
+                key = _grid_key(ax, ay, az)
+                slot = _hash_slot(key, mask)
+                c = -1
+                while table_keys[slot] != -1:
+                    if table_keys[slot] == key:
+                        c = table_cells[slot]
+                        break
+                    slot = (slot + 1) & mask
+                if c < 0:
+                    continue
+                for j in range(cell_start[c], cell_start[c + 1]):
+                    i = order[j]
+                    d0 = points[i, 0] - x0
+                    d1 = points[i, 1] - x1
+                    d2 = points[i, 2] - x2
+                    if d0 * d0 + d1 * d1 + d2 * d2 <= r2max:
+                        if base + found < limit:
+                            out[base + found] = i
+                        found += 1
+    if base + found <= limit:
+        out[base:base + found].sort()
+    return found
+
+
+@njit(parallel=True, cache=True)
+def grid_ball_csr(points, order, cell_start, table_keys, table_cells, origin, cell,
+                  query_points, radius, nthreads):
+    """All grid points within ``radius`` of each query point, CSR with ascending indices.
+
+    The grid comes from :func:`grid_build` with ``cell >= radius``, so the 27 cells around a
+    query cell hold every candidate. Same streaming scheme as :func:`kring_ball_csr_fast`.
+    """
+    m = query_points.shape[0]
+    r2max = radius * radius
+    inv = 1.0 / cell
+    counts = np.zeros(m + 1, dtype=np.int64)
+    nthreads = max(1, min(m, nthreads))
+    per = (m + nthreads - 1) // nthreads
+    dummy = np.empty(0, dtype=np.int64)
+    step = max(1, m // 64)
+    tot = 0
+    cnt = 0
+    for qi in range(0, m, step):
+        tot += _grid_ball_one(points, order, cell_start, table_keys, table_cells, origin, inv,
+                              query_points[qi, 0], query_points[qi, 1],
+                              query_points[qi, 2], r2max, dummy, 0, 0)
+        cnt += 1
+    cap = 16 + (3 * tot) // (2 * max(cnt, 1))
+    buf = np.empty(nthreads * per * cap, dtype=np.int64)
+    used = np.zeros(nthreads, dtype=np.int64)
+    for t in prange(nthreads):
+        lo = t * per * cap
+        limit = lo + per * cap
+        pos = lo
+        for qi in range(t * per, min(m, (t + 1) * per)):
+            f = _grid_ball_one(points, order, cell_start, table_keys, table_cells, origin, inv,
+                               query_points[qi, 0], query_points[qi, 1],
+                               query_points[qi, 2], r2max, buf, pos, limit)
+            counts[qi + 1] = f
+            pos += f
+        used[t] = pos - lo
+    for i in range(m):
+        counts[i + 1] += counts[i]
+    indices = np.empty(counts[m], dtype=np.int64)
+    for t in prange(nthreads):
+        q0 = t * per
+        if q0 >= m:
+            continue
+        q1 = min(m, (t + 1) * per)
+        if used[t] <= per * cap:
+            lo = t * per * cap
+            o = counts[q0]
+            for j in range(used[t]):
+                indices[o + j] = buf[lo + j]
+        else:
+            for qi in range(q0, q1):
+                _grid_ball_one(points, order, cell_start, table_keys, table_cells, origin, inv,
+                               query_points[qi, 0], query_points[qi, 1],
+                               query_points[qi, 2], r2max, indices, counts[qi], counts[qi + 1])
+    return counts, indices
+
+
+@njit(cache=True)
+def _smallest_eigvec_jacobi3(a, out):
+    """Unit eigenvector of the smallest eigenvalue of the symmetric 3x3 ``a`` (overwritten).
+
+    Cyclic Jacobi rotations to machine precision (as accurate as LAPACK's ``eigh`` here, unlike
+    the closed-form cubic); the rotations are accumulated in ``out``'s scratch frame.
+    """
+    v00 = 1.0
+    v01 = 0.0
+    v02 = 0.0
+    v10 = 0.0
+    v11 = 1.0
+    v12 = 0.0
+    v20 = 0.0
+    v21 = 0.0
+    v22 = 1.0
+    for sweep in range(50):
+        off = a[0, 1] * a[0, 1] + a[0, 2] * a[0, 2] + a[1, 2] * a[1, 2]
+        diag = a[0, 0] * a[0, 0] + a[1, 1] * a[1, 1] + a[2, 2] * a[2, 2]
+        if off <= 1e-36 * diag or off == 0.0:
+            break
+        for pq in range(3):
+            if pq == 0:
+                p, q, r = 0, 1, 2
+            elif pq == 1:
+                p, q, r = 0, 2, 1
+            else:
+                p, q, r = 1, 2, 0
+            apq = a[p, q]
+            if apq == 0.0:
+                continue
+            # rotation angle that zeroes a[p, q] (Golub & Van Loan, sym.schur2)
+            tau = (a[q, q] - a[p, p]) / (2.0 * apq)
+            if tau >= 0.0:
+                t = 1.0 / (tau + math.sqrt(1.0 + tau * tau))
+            else:
+                t = -1.0 / (-tau + math.sqrt(1.0 + tau * tau))
+            c = 1.0 / math.sqrt(1.0 + t * t)
+            s = t * c
+            app = a[p, p]
+            aqq = a[q, q]
+            arp = a[r, p]
+            arq = a[r, q]
+            a[p, p] = app - t * apq
+            a[q, q] = aqq + t * apq
+            a[p, q] = 0.0
+            a[q, p] = 0.0
+            a[r, p] = c * arp - s * arq
+            a[p, r] = a[r, p]
+            a[r, q] = s * arp + c * arq
+            a[q, r] = a[r, q]
+            # columns p, q of the accumulated rotation V
+            if p == 0 and q == 1:
+                v00, v01 = c * v00 - s * v01, s * v00 + c * v01
+                v10, v11 = c * v10 - s * v11, s * v10 + c * v11
+                v20, v21 = c * v20 - s * v21, s * v20 + c * v21
+            elif p == 0:
+                v00, v02 = c * v00 - s * v02, s * v00 + c * v02
+                v10, v12 = c * v10 - s * v12, s * v10 + c * v12
+                v20, v22 = c * v20 - s * v22, s * v20 + c * v22
+            else:
+                v01, v02 = c * v01 - s * v02, s * v01 + c * v02
+                v11, v12 = c * v11 - s * v12, s * v11 + c * v12
+                v21, v22 = c * v21 - s * v22, s * v21 + c * v22
+    k = 0
+    if a[1, 1] < a[k, k]:
+        k = 1
+    if a[2, 2] < a[k, k]:
+        k = 2
+    if k == 0:
+        x, y, z = v00, v10, v20
+    elif k == 1:
+        x, y, z = v01, v11, v21
+    else:
+        x, y, z = v02, v12, v22
+    s = 1.0 / math.sqrt(x * x + y * y + z * z)
+    out[0] = x * s
+    out[1] = y * s
+    out[2] = z * s
+
+
+@njit(parallel=True, cache=True)
+def pca_normals_csr(points, query_points, indptr, indices, radius):
+    """Unit normals (m, 3) of the least-squares plane through each query point's neighbours.
+
+    The covariance is accumulated exactly as in :func:`local_covariance` (same sums, same
+    order, so the same matrix); its smallest eigenvector comes from Jacobi rotations. NaN rows
+    where fewer than 3 points lie in the ball or the covariance is not finite. Signs are
+    arbitrary (the orientation step fixes them).
+    """
+    m = query_points.shape[0]
+    out = np.full((m, 3), np.nan)
+    r2max = radius * radius
+    inv_r = 1.0 / radius
+    nchunks = (m + 255) // 256
+    for ch in prange(nchunks):
+        cov = np.empty((3, 3))
+        ev = np.empty(3)
+        for q in range(ch * 256, min(m, (ch + 1) * 256)):
+            x0 = query_points[q, 0]
+            x1 = query_points[q, 1]
+            x2 = query_points[q, 2]
+            s0 = s1 = s2 = 0.0
+            s00 = s01 = s02 = s11 = s12 = s22 = 0.0
+            c = 1
+            for j in range(indptr[q], indptr[q + 1]):
+                k = indices[j]
+                a = points[k, 0] - x0
+                b = points[k, 1] - x1
+                d = points[k, 2] - x2
+                dd = a * a + b * b + d * d
+                if not (dd > 0.0 and dd <= r2max):
+                    continue
+                a *= inv_r
+                b *= inv_r
+                d *= inv_r
+                c += 1
+                s0 += a
+                s1 += b
+                s2 += d
+                s00 += a * a
+                s01 += a * b
+                s02 += a * d
+                s11 += b * b
+                s12 += b * d
+                s22 += d * d
+            if c < 3:
+                continue
+            m0 = s0 / c
+            m1 = s1 / c
+            m2 = s2 / c
+            cov[0, 0] = s00 / c - m0 * m0
+            cov[0, 1] = s01 / c - m0 * m1
+            cov[0, 2] = s02 / c - m0 * m2
+            cov[1, 1] = s11 / c - m1 * m1
+            cov[1, 2] = s12 / c - m1 * m2
+            cov[2, 2] = s22 / c - m2 * m2
+            cov[1, 0] = cov[0, 1]
+            cov[2, 0] = cov[0, 2]
+            cov[2, 1] = cov[1, 2]
+            ok = True
+            for i in range(3):
+                for j in range(3):
+                    if not np.isfinite(cov[i, j]):
+                        ok = False
+            if not ok:
+                continue
+            _smallest_eigvec_jacobi3(cov, ev)
+            out[q, 0] = ev[0]
+            out[q, 1] = ev[1]
+            out[q, 2] = ev[2]
+    return out

@@ -1,0 +1,275 @@
+"""LAS/LAZ point clouds: chunked reading and curvature fields written as LAS extra-bytes dimensions.
+
+Reading and writing go through laspy (LAZ through the lazrs backend) and stream the file in
+chunks, so files larger than memory are fine. The written file keeps every dimension of the input
+unchanged (raw integer X, Y, Z, intensity, classification, existing extra bytes, ...) and adds one
+named extra-bytes dimension per curvature field, readable by name in laspy, PDAL, CloudCompare and
+LAStools:
+
+====================  =======  ======================================================
+name                  type     meaning
+====================  =======  ======================================================
+k1, k2                float64  principal curvatures, 1 / model units, k1 >= k2, convex positive
+mean, gaussian        float64  (k1 + k2) / 2 and k1 * k2
+shape_index           float64  in [-1, 1], +1 for a convex cap
+curvedness            float64  sqrt((k1^2 + k2^2) / 2)
+valid                 uint8    1 where an estimate was possible, else 0 (curvatures are NaN)
+d1x d1y d1z           float64  unit direction of k1 (model axes)
+d2x d2y d2z           float64  unit direction of k2; (d1, d2, normal) is right-handed
+NormalX..NormalZ      float64  the unit normal used, only when it was estimated
+====================  =======  ======================================================
+
+Writes are atomic: the output goes to a temporary file in the output's folder and is renamed
+over ``out_path`` only when complete, so a failure never leaves a partial file. The input is
+never overwritten.
+
+>>> pts, nrm = read_las_points("scan.laz")                                # doctest: +SKIP
+>>> res = meshcurv.principal_curvatures(pts, radius=0.5, orientation=(0, 0, 100))  # doctest: +SKIP
+>>> write_las_curvature("scan.laz", "scan_curv.laz", res)                 # doctest: +SKIP
+"""
+
+import copy
+import os
+import tempfile
+
+import numpy as np
+
+__all__ = ["LasReadError", "CURVATURE_FIELDS", "NORMAL_FIELDS", "las_point_count",
+           "iter_las_chunks", "read_las_points", "result_fields", "annotate_las",
+           "write_las_curvature"]
+
+CURVATURE_FIELDS = ("k1", "k2", "mean", "gaussian", "shape_index", "curvedness", "valid",
+                    "d1x", "d1y", "d1z", "d2x", "d2y", "d2z")
+NORMAL_FIELDS = ("NormalX", "NormalY", "NormalZ")
+_DESCRIPTIONS = {
+    "k1": "max principal curvature", "k2": "min principal curvature",
+    "mean": "mean curvature", "gaussian": "Gaussian curvature",
+    "shape_index": "shape index, +1 convex cap", "curvedness": "curvedness",
+    "valid": "1 if curvature estimated",
+}
+# Names under which other tools store normals (PDAL, CloudCompare, ad-hoc scripts).
+_NORMAL_NAMES = (("normalx", "normaly", "normalz"), ("normal_x", "normal_y", "normal_z"),
+                 ("nx", "ny", "nz"))
+DEFAULT_CHUNK = 1_000_000
+
+
+class LasReadError(OSError):
+    """A LAS/LAZ file that cannot be read (missing, truncated, corrupt); the message names it."""
+
+
+def _is_las(path):
+    return str(path).lower().endswith((".las", ".laz"))
+
+
+def _open(path):
+    import laspy
+
+    if not _is_las(path):
+        raise ValueError(f"{path}: expected a .las or .laz file")
+    try:
+        return laspy.open(os.fspath(path))
+    except FileNotFoundError:
+        raise
+    except Exception as e:  # laspy/lazrs raise a variety of types for bad headers
+        raise LasReadError(f"{path}: not a readable LAS/LAZ file ({type(e).__name__}: {e})") from e
+
+
+def _normal_dims(point_format):
+    """Names of the three extra dimensions holding normals, or None."""
+    names = {n.lower(): n for n in point_format.extra_dimension_names}
+    for cand in _NORMAL_NAMES:
+        if all(c in names for c in cand):
+            return tuple(names[c] for c in cand)
+    return None
+
+
+def las_point_count(path):
+    """Number of points declared in the header of a LAS/LAZ file (int)."""
+    with _open(path) as reader:
+        return int(reader.header.point_count)
+
+
+def iter_las_chunks(path, chunk_size=DEFAULT_CHUNK, start=0, stop=None, with_records=False):
+    """Stream a LAS/LAZ file in chunks of points.
+
+    Parameters
+    ----------
+    path : str, a .las or .laz file
+    chunk_size : int, points per chunk
+    start, stop : int, the point range to read (default: all points)
+    with_records : bool, also yield laspy's raw point record of the chunk
+
+    Yields
+    ------
+    first : int, index of the chunk's first point in the file
+    xyz : (k, 3) float64, scaled coordinates, model units
+    normals : (k, 3) float64 or None, when the file has normal dimensions (NormalX.. or nx..)
+    record : laspy.ScaleAwarePointRecord, only with ``with_records``
+
+    Raises
+    ------
+    LasReadError
+        The file is truncated or corrupt; the message names the file and the point range.
+    """
+    with _open(path) as reader:
+        total = int(reader.header.point_count)
+        stop = total if stop is None else min(int(stop), total)
+        ndims = _normal_dims(reader.header.point_format)
+        pos = int(start)
+        try:
+            if pos:
+                reader.seek(pos)
+        except Exception as e:
+            raise LasReadError(f"{path}: cannot seek to point {pos} ({type(e).__name__}: {e})") from e
+        while pos < stop:
+            want = min(int(chunk_size), stop - pos)
+            try:
+                rec = reader.read_points(want)
+            except Exception as e:
+                raise LasReadError(
+                    f"{path}: cannot read points {pos}..{pos + want - 1} of {total}; the file is "
+                    f"truncated or corrupt ({type(e).__name__}: {e})") from e
+            if len(rec) != want:
+                raise LasReadError(
+                    f"{path}: header declares {total} points but the data ends after "
+                    f"{pos + len(rec)}; the file is truncated")
+            xyz = np.column_stack([np.asarray(rec.x, dtype=np.float64),
+                                   np.asarray(rec.y, dtype=np.float64),
+                                   np.asarray(rec.z, dtype=np.float64)])
+            nv = None
+            if ndims is not None:
+                nv = np.column_stack([np.asarray(rec[d], dtype=np.float64) for d in ndims])
+            yield (pos, xyz, nv, rec) if with_records else (pos, xyz, nv)
+            pos += want
+
+
+def read_las_points(path, chunk_size=DEFAULT_CHUNK):
+    """All points of a LAS/LAZ file in memory.
+
+    Returns
+    -------
+    xyz : (n, 3) float64, model units, file order
+    normals : (n, 3) float64 or None, when the file has normal dimensions
+    """
+    xyz, nv = [], []
+    for _, p, n in iter_las_chunks(path, chunk_size):
+        xyz.append(p)
+        nv.append(n)
+    if not xyz:
+        return np.zeros((0, 3)), None
+    return np.concatenate(xyz), (None if nv[0] is None else np.concatenate(nv))
+
+
+def result_fields(result, normals=False, float_type="f8"):
+    """The extra-bytes fields of a :class:`~meshcurv.CurvatureResult`, as ``{name: (n,) array}``.
+
+    ``normals=True`` adds NormalX, NormalY, NormalZ (write them when they were estimated).
+    """
+    ft = np.dtype(float_type)
+    out = {
+        "k1": result.k1, "k2": result.k2, "mean": result.mean, "gaussian": result.gaussian,
+        "shape_index": result.shape_index, "curvedness": result.curvedness,
+        "valid": np.asarray(result.valid, dtype=np.uint8),
+    }
+    for name, arr in (("d1", result.d1), ("d2", result.d2)):
+        for a, c in enumerate("xyz"):
+            out[f"{name}{c}"] = arr[:, a]
+    if normals:
+        for a, name in enumerate(NORMAL_FIELDS):
+            out[name] = result.normals[:, a]
+    return {k: (v if k == "valid" else np.asarray(v, dtype=ft)) for k, v in out.items()}
+
+
+def _field_types(names, float_type):
+    return [(n, np.uint8 if n == "valid" else np.dtype(float_type)) for n in names]
+
+
+def _check_paths(in_path, out_path):
+    if not _is_las(out_path):
+        raise ValueError(f"{out_path}: the output must be a .las or .laz file")
+    if os.path.abspath(in_path) == os.path.abspath(out_path) or (
+            os.path.exists(out_path) and os.path.samefile(in_path, out_path)):
+        raise ValueError(f"{out_path}: refusing to overwrite the input file")
+
+
+def _publish(tmp, out_path):
+    """Give a finished temporary file the usual permissions and rename it over ``out_path``."""
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)
+    os.replace(tmp, out_path)
+
+
+def annotate_las(in_path, out_path, fields_for, names, chunk_size=DEFAULT_CHUNK, float_type="f8"):
+    """Copy a LAS/LAZ file chunk by chunk, adding extra-bytes dimensions; atomic.
+
+    Parameters
+    ----------
+    in_path, out_path : str; ``out_path`` ending in .laz is compressed (lazrs)
+    fields_for : callable ``(first, count) -> {name: (count,) array}`` giving the new fields of
+        points ``first .. first + count - 1`` (file order)
+    names : sequence of str, the new dimensions, in the order they are added
+    chunk_size : int, points per chunk (bounds the memory)
+    float_type : numpy float dtype of the float fields ("f8" or "f4")
+
+    Raises
+    ------
+    ValueError
+        Output not .las/.laz, output is the input, or the input already has a dimension of
+        one of ``names``.
+    LasReadError
+        The input is truncated or corrupt (nothing is left at ``out_path``).
+    """
+    import laspy
+
+    _check_paths(in_path, out_path)
+    with _open(in_path) as reader:
+        header = copy.deepcopy(reader.header)
+    existing = {d.lower() for d in header.point_format.dimension_names}
+    clash = [n for n in names if n.lower() in existing]
+    if clash:
+        raise ValueError(f"{in_path} already has dimension(s) {clash}; annotate the original file")
+    header.add_extra_dims([laspy.ExtraBytesParams(name=n, type=t, description=_DESCRIPTIONS.get(n, ""))
+                           for n, t in _field_types(names, float_type)])
+    folder = os.path.dirname(os.path.abspath(out_path))
+    fd, tmp = tempfile.mkstemp(prefix="." + os.path.basename(out_path) + ".", suffix=".tmp", dir=folder)
+    try:
+        with os.fdopen(fd, "wb") as fh, laspy.open(
+                fh, mode="w", header=header, closefd=False,
+                do_compress=str(out_path).lower().endswith(".laz")) as writer:
+            for first, _, _, rec in iter_las_chunks(in_path, chunk_size, with_records=True):
+                out = laspy.ScaleAwarePointRecord.zeros(len(rec), header=header)
+                for name in rec.array.dtype.names:  # raw values: the input's dims, bit for bit
+                    out.array[name] = rec.array[name]
+                fields = fields_for(first, len(rec))
+                for name in names:
+                    out.array[name] = fields[name]
+                writer.write_points(out)
+        _publish(tmp, out_path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+        raise
+
+
+def write_las_curvature(in_path, out_path, result, normals=None, chunk_size=DEFAULT_CHUNK,
+                        float_type="f8"):
+    """Write ``in_path`` with the curvature fields of ``result`` (one row per point) to ``out_path``.
+
+    Parameters
+    ----------
+    in_path, out_path : str, .las or .laz
+    result : CurvatureResult with one row per point of ``in_path``, in file order
+    normals : bool, write NormalX..NormalZ (default: when the input has no normals)
+    """
+    with _open(in_path) as reader:
+        total = int(reader.header.point_count)
+        has_normals = _normal_dims(reader.header.point_format) is not None
+    if len(result) != total:
+        raise ValueError(f"result has {len(result)} rows, {in_path} has {total} points")
+    if normals is None:
+        normals = not has_normals
+    fields = result_fields(result, normals=normals, float_type=float_type)
+    names = list(CURVATURE_FIELDS) + (list(NORMAL_FIELDS) if normals else [])
+    annotate_las(in_path, out_path, lambda a, k: {n: fields[n][a:a + k] for n in names}, names,
+                 chunk_size=chunk_size, float_type=float_type)

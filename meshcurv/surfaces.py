@@ -1,0 +1,220 @@
+"""Analytic test surfaces with exact normals, principal curvatures and directions.
+
+Every generator returns a :class:`Surface`: a triangle mesh (faces counter-clockwise seen from
+the side the normals point to), the exact outward unit normals, exact ``k1 >= k2`` (convex
+positive) and unit principal directions, and ``border_distance``, the distance of each vertex
+to the border of the parameter domain (inf on closed surfaces), so tests can skip the border.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import Delaunay
+
+__all__ = ["Surface", "paraboloid", "monkey_saddle", "sphere", "cylinder", "torus",
+           "add_normal_noise"]
+
+
+@dataclass
+class Surface:
+    """Sampled analytic surface; all arrays have one row per vertex.
+
+    vertices (n, 3), faces (m, 3) int64, normals (n, 3), k1 (n,), k2 (n,), d1 (n, 3), d2 (n, 3)
+    (NaN at umbilics, where directions are undefined), border_distance (n,).
+    """
+
+    name: str
+    vertices: np.ndarray
+    faces: np.ndarray
+    normals: np.ndarray
+    k1: np.ndarray
+    k2: np.ndarray
+    d1: np.ndarray
+    d2: np.ndarray
+    border_distance: np.ndarray
+
+    @property
+    def diagonal(self):
+        """Bounding-box diagonal, model units."""
+        return float(np.linalg.norm(np.ptp(self.vertices, axis=0)))
+
+
+def _unit(v):
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def _orient_faces(vertices, faces, normals):
+    """Flip triangles whose winding disagrees with the exact normals at their corners."""
+    fn = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]],
+                  vertices[faces[:, 2]] - vertices[faces[:, 0]])
+    flip = np.einsum("ij,ij->i", fn, normals[faces].sum(axis=1)) < 0
+    faces = faces.copy()
+    faces[flip] = faces[flip][:, ::-1]
+    return faces
+
+
+def _grid_faces(nu, nv, wrap_u=False, wrap_v=False):
+    """Two triangles per cell of an nu x nv vertex grid (index i * nv + j), optionally wrapped."""
+    iu = np.arange(nu if wrap_u else nu - 1)
+    jv = np.arange(nv if wrap_v else nv - 1)
+    i, j = np.meshgrid(iu, jv, indexing="ij")
+    i, j = i.ravel(), j.ravel()
+    a = i * nv + j
+    b = ((i + 1) % nu) * nv + j
+    c = ((i + 1) % nu) * nv + (j + 1) % nv
+    d = i * nv + (j + 1) % nv
+    return np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])]).astype(np.int64)
+
+
+def _monge(name, x, y, f, fx, fy, fxx, fxy, fyy, normal_sign, faces, border):
+    """Exact differential geometry of the graph z = f(x, y).
+
+    With X_x = (1, 0, fx), X_y = (0, 1, fy) and the chosen unit normal N = s (-fx, -fy, 1) / W,
+    the convex-positive shape operator is I^-1 (-II) with II_ij = X_ij . N.
+    """
+    w = np.sqrt(1 + fx * fx + fy * fy)
+    normals = normal_sign * np.column_stack([-fx, -fy, np.ones_like(x)]) / w[:, None]
+    e, f1, g = 1 + fx * fx, fx * fy, 1 + fy * fy
+    l, m, nn = (-normal_sign * c / w for c in (fxx, fxy, fyy))
+    det = e * g - f1 * f1
+    # S = I^-1 II' = [[s11, s12], [s21, s22]]
+    s11 = (g * l - f1 * m) / det
+    s12 = (g * m - f1 * nn) / det
+    s21 = (e * m - f1 * l) / det
+    s22 = (e * nn - f1 * m) / det
+    half_tr = 0.5 * (s11 + s22)
+    disc = np.sqrt(np.maximum(half_tr ** 2 - (s11 * s22 - s12 * s21), 0.0))
+    k1, k2 = half_tr + disc, half_tr - disc
+
+    def direction(k):
+        # eigenvector of S for eigenvalue k: either row of (S - k I) rotated by 90 degrees
+        a = np.column_stack([s12, k - s11])
+        b = np.column_stack([k - s22, s21])
+        pick = np.linalg.norm(a, axis=1) >= np.linalg.norm(b, axis=1)
+        ab = np.where(pick[:, None], a, b)
+        t = ab[:, :1] * np.column_stack([np.ones_like(x), np.zeros_like(x), fx]) \
+            + ab[:, 1:] * np.column_stack([np.zeros_like(x), np.ones_like(x), fy])
+        with np.errstate(invalid="ignore"):
+            t = _unit(t)
+        t[disc <= 1e-12 * np.maximum(1.0, np.abs(half_tr))] = np.nan
+        return t
+
+    d1 = direction(k1)
+    d2 = np.cross(normals, d1)
+    vertices = np.column_stack([x, y, f])
+    faces = _orient_faces(vertices, faces, normals)
+    return Surface(name, vertices, faces, normals, k1, k2, d1, d2, border)
+
+
+def _xy_samples(extent, sampling, spacing, n, seed):
+    """Regular grid (with its faces) or uniform random points (Delaunay faces) on [-e, e]^2."""
+    if sampling == "regular":
+        t = np.linspace(-extent, extent, int(round(2 * extent / spacing)) + 1)
+        x, y = (a.ravel() for a in np.meshgrid(t, t, indexing="ij"))
+        faces = _grid_faces(len(t), len(t))
+    elif sampling == "random":
+        rng = np.random.default_rng(seed)
+        x, y = rng.uniform(-extent, extent, (2, n))
+        faces = Delaunay(np.column_stack([x, y])).simplices.astype(np.int64)
+    else:
+        raise ValueError(f"sampling must be 'regular' or 'random', got {sampling!r}")
+    border = extent - np.maximum(np.abs(x), np.abs(y))
+    return x, y, faces, border
+
+
+def paraboloid(sampling="regular", a=0.2, b=0.1, extent=10.0, spacing=0.1, n=40000, seed=0):
+    """The paper's Table 2 surface z = a x^2 + b y^2 on [-extent, extent]^2.
+
+    Normals point out of the bowl (downward at the apex), so k1 = 2a, k2 = 2b > 0 there.
+
+    Examples
+    --------
+    >>> s = paraboloid(spacing=1.0)
+    >>> s.vertices.shape, round(float(s.k1[220]), 12), round(float(s.k2[220]), 12)
+    ((441, 3), 0.4, 0.2)
+    """
+    x, y, faces, border = _xy_samples(extent, sampling, spacing, n, seed)
+    z0 = np.zeros_like(x)
+    return _monge("paraboloid", x, y, a * x * x + b * y * y, 2 * a * x, 2 * b * y,
+                  2 * a + z0, z0, 2 * b + z0, -1.0, faces, border)
+
+
+def monkey_saddle(sampling="regular", extent=0.5, spacing=0.01, n=10000, seed=0):
+    """Monkey saddle z = x^3 - 3 x y^2 on [-extent, extent]^2, upward normals (flat at 0)."""
+    x, y, faces, border = _xy_samples(extent, sampling, spacing, n, seed)
+    return _monge("monkey_saddle", x, y, x ** 3 - 3 * x * y * y, 3 * x * x - 3 * y * y,
+                  -6 * x * y, 6 * x, -6 * y, -6 * x, 1.0, faces, border)
+
+
+def sphere(radius=1.0, subdivisions=5, sampling="regular", n=10000, seed=0):
+    """Sphere of the given radius: an icosphere, or ``n`` uniform random points (hull faces).
+
+    k1 = k2 = 1 / radius everywhere; directions are undefined (NaN).
+    """
+    if sampling == "regular":
+        import trimesh
+
+        ico = trimesh.creation.icosphere(subdivisions=subdivisions, radius=1.0)
+        unit = np.asarray(ico.vertices, dtype=np.float64)
+        unit = _unit(unit)
+        faces = np.asarray(ico.faces, dtype=np.int64)
+    elif sampling == "random":
+        from scipy.spatial import ConvexHull
+
+        rng = np.random.default_rng(seed)
+        unit = _unit(rng.normal(size=(n, 3)))
+        faces = ConvexHull(unit).simplices.astype(np.int64)
+    else:
+        raise ValueError(f"sampling must be 'regular' or 'random', got {sampling!r}")
+    v = radius * unit
+    k = np.full(len(v), 1.0 / radius)
+    nan3 = np.full((len(v), 3), np.nan)
+    return Surface("sphere", v, _orient_faces(v, faces, unit), unit, k, k.copy(), nan3,
+                   nan3.copy(), np.full(len(v), np.inf))
+
+
+def cylinder(radius=1.0, height=4.0, n_around=200, n_along=None):
+    """Open cylinder around the z axis: k1 = 1 / radius around, k2 = 0 along the axis."""
+    if n_along is None:
+        n_along = int(round(height / (2 * np.pi * radius / n_around))) + 1
+    u = np.linspace(0, 2 * np.pi, n_around, endpoint=False)
+    z = np.linspace(-height / 2, height / 2, n_along)
+    uu, zz = (a.ravel() for a in np.meshgrid(u, z, indexing="ij"))
+    normals = np.column_stack([np.cos(uu), np.sin(uu), np.zeros_like(uu)])
+    v = np.column_stack([radius * normals[:, :2], zz])
+    d1 = np.column_stack([-np.sin(uu), np.cos(uu), np.zeros_like(uu)])
+    d2 = np.cross(normals, d1)
+    faces = _orient_faces(v, _grid_faces(n_around, n_along, wrap_u=True), normals)
+    return Surface("cylinder", v, faces, normals, np.full(len(v), 1.0 / radius),
+                   np.zeros(len(v)), d1, d2, height / 2 - np.abs(zz))
+
+
+def torus(major=2.0, minor=0.5, n_major=240, n_minor=60):
+    """Torus around the z axis; angle v around the tube is 0 on the outer equator.
+
+    k1 = 1 / minor (around the tube), k2 = cos v / (major + minor cos v) (around the axis).
+    """
+    u = np.linspace(0, 2 * np.pi, n_major, endpoint=False)
+    w = np.linspace(0, 2 * np.pi, n_minor, endpoint=False)
+    uu, ww = (a.ravel() for a in np.meshgrid(u, w, indexing="ij"))
+    normals = np.column_stack([np.cos(ww) * np.cos(uu), np.cos(ww) * np.sin(uu), np.sin(ww)])
+    ring = major + minor * np.cos(ww)
+    v = np.column_stack([ring * np.cos(uu), ring * np.sin(uu), minor * np.sin(ww)])
+    d1 = np.column_stack([-np.sin(ww) * np.cos(uu), -np.sin(ww) * np.sin(uu), np.cos(ww)])
+    d2 = np.cross(normals, d1)
+    faces = _orient_faces(v, _grid_faces(n_major, n_minor, wrap_u=True, wrap_v=True), normals)
+    return Surface("torus", v, faces, normals, np.full(len(v), 1.0 / minor),
+                   np.cos(ww) / ring, d1, d2, np.full(len(v), np.inf))
+
+
+def add_normal_noise(surface, sigma_fraction, seed=0):
+    """Copy of ``surface`` with Gaussian noise along the exact normals.
+
+    ``sigma_fraction`` is the standard deviation as a fraction of the bounding-box diagonal
+    (0.003 = 0.3 %). Exact curvature fields are kept as the ground truth.
+    """
+    rng = np.random.default_rng(seed)
+    sigma = sigma_fraction * surface.diagonal
+    v = surface.vertices + rng.normal(scale=sigma, size=(len(surface.vertices), 1)) * surface.normals
+    return Surface(surface.name, v, surface.faces, surface.normals, surface.k1, surface.k2,
+                   surface.d1, surface.d2, surface.border_distance)

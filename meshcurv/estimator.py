@@ -117,7 +117,7 @@ def _blocks(query, progress, desc):
 
 def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_directions=8,
                          neighborhood="auto", *, slab=0.25, min_points=3, min_spread=0.25,
-                         weighting="adaptive", circle_normalization="tangent",
+                         weighting="distance", circle_normalization="tangent",
                          section_blend=True, robust=True,
                          half_frequency=False, normal_estimation="auto", orientation="mst",
                          query=None, progress=False):
@@ -157,12 +157,12 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
     min_spread : float, default 0.25
         Fewest fraction of ``radius`` the farthest point of a half-set must reach along its
         direction; rejects one-sided stubs near borders and holes.
-    weighting : {"adaptive", "none", "distance"}
-        Weights of the points in each circle fit. "none": equal weights (least noise).
-        "distance": ``(1 - r^2 / radius^2)^4``, which favours near points (least bias where
-        curvature varies, but 2-3x the noise). "adaptive" (default): both fits are made and the
-        result moves from the unweighted to the weighted one as far as their difference
-        exceeds what the measured noise explains: weighted on clean data, unweighted on noisy.
+    weighting : {"distance", "none"}
+        Weights of the points in each circle fit. "distance" (default):
+        ``(1 - r^2 / radius^2)^4``, which favours near points: on the Table 2 paraboloid
+        (radius 2) it halves the error of equal weights (mean |dk1| 0.0015 vs 0.0030), because
+        the curvature varies inside the ball. "none": equal weights; about half the noise-induced
+        error, the better choice on noisy scans at a given radius.
     circle_normalization : {"tangent", "unit"}
         Normalisation of the CGA sphere vector t in each circle fit. "unit": |t| = 1, the
         smallest eigenvector of the 3x3 matrix (the paper). "tangent" (default): t1 = 1, the
@@ -222,10 +222,8 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
             raise ValueError("orientation must be 'mst' or a (3,) viewpoint")
     if neighborhood == "kring" and f is None:
         raise ValueError("neighborhood='kring' needs faces")
-    weighting_code = {"none": kernels.WEIGHTS_NONE, "distance": kernels.WEIGHTS_DISTANCE,
-                      "adaptive": kernels.WEIGHTS_ADAPTIVE}.get(weighting)
-    if weighting_code is None:
-        raise ValueError(f"weighting must be 'adaptive', 'none' or 'distance', got {weighting!r}")
+    if weighting not in ("distance", "none"):
+        raise ValueError(f"weighting must be 'distance' or 'none', got {weighting!r}")
     if circle_normalization not in ("tangent", "unit"):
         raise ValueError(f"circle_normalization must be 'tangent' or 'unit', got {circle_normalization!r}")
     if int(n_directions) < 3:
@@ -305,7 +303,7 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
         sl = slice(pos, pos + len(idx))
         kernels.curvature_cga(
             v, v[idx], np.ascontiguousarray(qn[sl]), indptr, indices, radius, int(n_directions),
-            float(slab), float(min_points), float(min_spread), weighting_code,
+            float(slab), float(min_points), float(min_spread), weighting == "distance",
             circle_normalization == "unit", bool(section_blend), bool(half_frequency), bool(robust),
             k1[sl], k2[sl], d1[sl], d2[sl], n_samples[sl], residual[sl], n_neighbors[sl], noise[sl])
         pos += len(idx)

@@ -12,23 +12,19 @@ import numpy as np
 from numba import njit, prange
 
 # Columns of the per-half-set accumulator (coordinates scaled by 1/radius). The CGA circle fit
-# needs B = sum w w^T over rows w = (h, -1, -r2/2): the sums of 1, h, h^2, r2, h*r2, r2^2. The
-# sums of r2*cos2phi ... tell the sine fit which blend of directions a half-set really saw (see
-# ``_sample_design``). Block U holds unit weights, block W distance weights (1 - r2)^WEIGHT_POWER;
-# W2 holds sums of squared weights for the variance of the weighted fit.
-_N, _H, _HH, _R, _HR, _RR, _RC, _RRC, _RS, _RRS = range(10)
-U = 0
-W = 10
-_W2, _W2R, _W2RR, _CNT, _EMAX = range(20, 25)
-N_ACC = 25
-WEIGHT_POWER = 2
+# needs B = sum w w^T over rows w = (h, -1, -r2/2): the weighted sums of 1, h, h^2, r2, h*r2,
+# r2^2. The sums of r2*cos2phi ... tell the sine fit which blend of directions a half-set really
+# saw (see ``_sample_design``). _CNT counts the points, _EMAX is the farthest reach along the
+# plane's direction.
+_N, _H, _HH, _R, _HR, _RR, _RC, _RRC, _RS, _RRS, _CNT, _EMAX = range(12)
+N_ACC = 12
+
+# Exponent p of the distance weights (1 - r^2 / radius^2)^p (measured: p = 2 leaves twice the
+# bias of p = 4 on the Table 2 paraboloid; p = 8 gains little more and doubles the noise again).
+WEIGHT_POWER = 4
 
 # Points per chunk handed to one thread (keeps scratch arrays per chunk, not per point).
 CHUNK = 256
-
-# Weighting modes of the circle fits.
-WEIGHTS_NONE, WEIGHTS_DISTANCE, WEIGHTS_ADAPTIVE = 0, 1, 2
-
 
 @njit(cache=True)
 def _smallest_eigvec_sym3(a11, a12, a13, a22, a23, a33, out):
@@ -190,7 +186,7 @@ def _solve_sym(m, rhs, npar, sol):
 
 
 @njit(cache=True)
-def _sample_design(acc, k, b, corrected, theta):
+def _sample_design(acc, k, corrected, theta):
     """Regressors (cos 2theta, sin 2theta) of one circle-fit sample for the Euler model.
 
     Nominally the sample's plane direction theta. With ``corrected`` they are the cos/sin 2phi
@@ -198,22 +194,21 @@ def _sample_design(acc, k, b, corrected, theta):
     order in the heights, the fitted curvature is sum_p w_p k(phi_p) / sum_p w_p with
     w_p = r2_p (r2_p - mean r2), so a slab of finite width samples a known blend of directions
     rather than theta alone, and the Euler model can be fitted to that blend exactly.
-    ``b`` is the accumulator block (U or W).
     """
     if not corrected:
         return math.cos(2.0 * theta), math.sin(2.0 * theta)
-    rbar = acc[k, b + _R] / acc[k, b + _N]
-    den = acc[k, b + _RR] - rbar * acc[k, b + _R]
+    rbar = acc[k, _R] / acc[k, _N]
+    den = acc[k, _RR] - rbar * acc[k, _R]
     if den <= 0.0:
         return math.cos(2.0 * theta), math.sin(2.0 * theta)
-    mc = (acc[k, b + _RRC] - rbar * acc[k, b + _RC]) / den
-    ms = (acc[k, b + _RRS] - rbar * acc[k, b + _RS]) / den
+    mc = (acc[k, _RRC] - rbar * acc[k, _RC]) / den
+    ms = (acc[k, _RRS] - rbar * acc[k, _RS]) / den
     return mc, ms
 
 
 @njit(cache=True)
-def _circle_fit(acc, k, b, unit_norm, ev):
-    """CGA circle fit of half-set k from accumulator block b: (kappa, squared height residuals).
+def _circle_fit(acc, k, unit_norm, ev):
+    """CGA circle fit of half-set k from its accumulator row: (kappa, squared height residuals).
 
     B = [[Shh, -Sh, -Shr/2], [-Sh, N, Sr/2], [-Shr/2, Sr/2, Srr/4]] and the sphere is
     t = (t1, t2, t3) with kappa = -t3 / t1 (scaled units). ``unit_norm`` minimises t^T B t over
@@ -221,14 +216,15 @@ def _circle_fit(acc, k, b, unit_norm, ev):
     eigenproblem B t = lambda diag(1, 0, 0) t, i.e. the 2x2 system
     [[N, Sr/2], [Sr/2, Srr/4]] (t2, t3) = (Sh, Shr/2): the same sphere on exact data, but it
     cannot drift to the spheres centred at x (t1 -> 0) that send |kappa| to infinity under noise.
-    The residual is in height units squared (P.S = t1 * height residual). NaN if degenerate.
+    The residual is the weighted sum of squared height residuals (P.S = t1 * height
+    residual), in units of radius^2. NaN if degenerate.
     """
-    b11 = acc[k, b + _HH]
-    b12 = -acc[k, b + _H]
-    b13 = -0.5 * acc[k, b + _HR]
-    b22 = acc[k, b + _N]
-    b23 = 0.5 * acc[k, b + _R]
-    b33 = 0.25 * acc[k, b + _RR]
+    b11 = acc[k, _HH]
+    b12 = -acc[k, _H]
+    b13 = -0.5 * acc[k, _HR]
+    b22 = acc[k, _N]
+    b23 = 0.5 * acc[k, _R]
+    b33 = 0.25 * acc[k, _RR]
     if unit_norm:
         lam = _smallest_eigvec_sym3(b11, b12, b13, b22, b23, b33, ev)
         if not (abs(ev[0]) > 1e-12 * abs(ev[2])) or not np.isfinite(lam):
@@ -274,21 +270,13 @@ def _model(rows, s, npar, sol):
 
 @njit(cache=True)
 def _estimate_one(points, nbr, lo, hi, x, n, radius, ndir, slab, min_points, min_spread,
-                  weighting, unit_norm, corrected, half_frequency, robust,
-                  ca, sa, acc, kap_u, kap_w, rows_u, rows_w, var_u, var_w, active, scratch,
-                  mat, rhs, sol_u, sol_w, ev, tu, tv, res):
+                  weighted, unit_norm, corrected, half_frequency, robust,
+                  ca, sa, acc, kappa, rows, active, scratch, mat, rhs, sol, ev, tu, tv, res):
     """Circle fits in 2*ndir half-sets around one point, then the Euler model fit.
 
     Writes (k1, k2, theta1, n_used_samples, residual_rms, n_neighbours, noise) into ``res`` and
-    the frame into tu, tv. Lengths inside are in units of ``radius``.
-
-    With adaptive weighting both an unweighted and a distance-weighted estimate are made from
-    the same points. The weighted one has less model bias, the unweighted one less noise. Their
-    difference D is noise plus bias difference; under noise alone its variance is
-    Var(weighted) - Var(unweighted) (the unweighted fit is the efficient one), predicted from
-    the height noise measured by the circle-fit residuals. The result moves from the
-    unweighted towards the weighted estimate by alpha = max(0, 1 - Var(D) / |D|^2): all the way
-    on clean data, not at all where D is explained by noise.
+    the frame into tu, tv. Lengths inside are in units of ``radius``; ``weighted`` selects the
+    distance weights (1 - r^2)^WEIGHT_POWER instead of equal weights.
     """
     nh = 2 * ndir
     for k in range(nh):
@@ -321,29 +309,26 @@ def _estimate_one(points, nbr, lo, hi, x, n, radius, ndir, slab, min_points, min
         t2 = u * u + v * v
         if t2 <= 0.0:
             continue
-        w = (1.0 - r2) ** WEIGHT_POWER
+        w = (1.0 - r2) ** WEIGHT_POWER if weighted else 1.0
         c2 = (u * u - v * v) / t2
         s2 = 2.0 * u * v / t2
+        wr = w * r2
+        wrr = wr * r2
         for i in range(ndir):
             if abs(-sa[i] * u + ca[i] * v) > slab:
                 continue
             e = ca[i] * u + sa[i] * v
             k = i if e >= 0.0 else i + ndir
-            for b in (U, W):
-                wb = 1.0 if b == U else w
-                acc[k, b + _N] += wb
-                acc[k, b + _H] += wb * h
-                acc[k, b + _HH] += wb * h * h
-                acc[k, b + _R] += wb * r2
-                acc[k, b + _HR] += wb * h * r2
-                acc[k, b + _RR] += wb * r2 * r2
-                acc[k, b + _RC] += wb * r2 * c2
-                acc[k, b + _RRC] += wb * r2 * r2 * c2
-                acc[k, b + _RS] += wb * r2 * s2
-                acc[k, b + _RRS] += wb * r2 * r2 * s2
-            acc[k, _W2] += w * w
-            acc[k, _W2R] += w * w * r2
-            acc[k, _W2RR] += w * w * r2 * r2
+            acc[k, _N] += w
+            acc[k, _H] += w * h
+            acc[k, _HH] += w * h * h
+            acc[k, _R] += wr
+            acc[k, _HR] += wr * h
+            acc[k, _RR] += wrr
+            acc[k, _RC] += wr * c2
+            acc[k, _RRC] += wrr * c2
+            acc[k, _RS] += wr * s2
+            acc[k, _RRS] += wrr * s2
             acc[k, _CNT] += 1.0
             if abs(e) > acc[k, _EMAX]:
                 acc[k, _EMAX] = abs(e)
@@ -360,37 +345,24 @@ def _estimate_one(points, nbr, lo, hi, x, n, radius, ndir, slab, min_points, min
             k = i + side * ndir
             if acc[k, _CNT] < min_points or acc[k, _EMAX] < min_spread:
                 continue
-            acc[k, U + _N] += 1.0
-            acc[k, W + _N] += 1.0
-            acc[k, _W2] += 1.0
-            ku, ssu = _circle_fit(acc, k, U, unit_norm, ev)
-            kw, ssw = _circle_fit(acc, k, W, unit_norm, ev)
-            if not (np.isfinite(ku) and np.isfinite(kw)):
+            acc[k, _N] += 1.0
+            kap, ss = _circle_fit(acc, k, unit_norm, ev)
+            if not np.isfinite(kap):
                 continue
             theta = math.atan2(sa[i], ca[i]) + side * math.pi
-            kap_u[m] = ku
-            kap_w[m] = kw
-            for rows, b in ((rows_u, U), (rows_w, W)):
-                dc, ds = _sample_design(acc, k, b, corrected, theta)
-                rows[m, 0] = 1.0
-                rows[m, 1] = dc
-                rows[m, 2] = ds
-                rows[m, 3] = math.cos(theta)
-                rows[m, 4] = math.sin(theta)
-            # Var(kappa) / sigma^2 of the two fits, linearised as h = kappa r2 / 2 + c:
-            # 4 / sum (r2 - rbar)^2 unweighted, 4 sum w^2 (r2 - rbar_w)^2 / (sum w (r2 - rbar_w)^2)^2
-            nu = acc[k, U + _N]
-            su = acc[k, U + _RR] - acc[k, U + _R] ** 2 / nu
-            nw = acc[k, W + _N]
-            rbw = acc[k, W + _R] / nw
-            sw = acc[k, W + _RR] - acc[k, W + _R] * rbw
-            sw2 = acc[k, _W2RR] - 2.0 * rbw * acc[k, _W2R] + rbw * rbw * acc[k, _W2]
-            var_u[m] = 4.0 / su if su > 0.0 else np.inf
-            var_w[m] = 4.0 * sw2 / (sw * sw) if sw > 0.0 else np.inf
+            kappa[m] = kap
+            dc, ds = _sample_design(acc, k, corrected, theta)
+            rows[m, 0] = 1.0
+            rows[m, 1] = dc
+            rows[m, 2] = ds
+            rows[m, 3] = math.cos(theta)
+            rows[m, 4] = math.sin(theta)
             active[m] = 1.0
-            if nu > 3.0:
-                noise_ss += ssu
-                noise_dof += nu - 3.0
+            # height noise: weighted residual per unit weight, 3 parameters per circle
+            cnt = acc[k, _CNT] + 1.0
+            if cnt > 3.0:
+                noise_ss += ss / acc[k, _N] * cnt
+                noise_dof += cnt - 3.0
             m += 1
             seen = True
         if seen:
@@ -399,12 +371,12 @@ def _estimate_one(points, nbr, lo, hi, x, n, radius, ndir, slab, min_points, min
     if planes_seen < 3 or m < 5:
         return
     npar = 5 if half_frequency else 3
-    if not _euler_fit(rows_u, kap_u, active, m, npar, mat, rhs, sol_u):
+    if not _euler_fit(rows, kappa, active, m, npar, mat, rhs, sol):
         return
     if robust:
         # drop samples further than 3 robust sigmas (MAD) from the model, then refit
         for s in range(m):
-            r = abs(kap_u[s] - _model(rows_u, s, npar, sol_u))
+            r = abs(kappa[s] - _model(rows, s, npar, sol))
             j = s
             while j > 0 and scratch[j - 1] > r:
                 scratch[j] = scratch[j - 1]
@@ -415,48 +387,29 @@ def _estimate_one(points, nbr, lo, hi, x, n, radius, ndir, slab, min_points, min
         changed = False
         if cut > 0.0:
             for s in range(m):
-                if abs(kap_u[s] - _model(rows_u, s, npar, sol_u)) > cut:
+                if abs(kappa[s] - _model(rows, s, npar, sol)) > cut:
                     active[s] = 0.0
                     changed = True
-        if changed and not _euler_fit(rows_u, kap_u, active, m, npar, mat, rhs, sol_u):
+        if changed and not _euler_fit(rows, kappa, active, m, npar, mat, rhs, sol):
             return
     used = 0
     sse = 0.0
-    vu = 0.0
-    vw = 0.0
     for s in range(m):
         if active[s] != 0.0:
             used += 1
-            sse += (kap_u[s] - _model(rows_u, s, npar, sol_u)) ** 2
-            vu += var_u[s]
-            vw += var_w[s]
-    sigma2 = noise_ss / noise_dof if noise_dof > 0.0 else 0.0
-    alpha = 0.0
-    if weighting != WEIGHTS_NONE:
-        if _euler_fit(rows_w, kap_w, active, m, npar, mat, rhs, sol_w):
-            alpha = 1.0
-            if weighting == WEIGHTS_ADAPTIVE:
-                # parameter variances ~ mean sample variance * (1 + 2 + 2) / used for (A, B, C)
-                var_d = max(sigma2 * 30.0 * (vw - vu) / (used * used), 0.0)
-                dd = 0.0
-                for a in range(3):
-                    dd += (sol_w[a] - sol_u[a]) ** 2
-                alpha = max(0.0, 1.0 - var_d / dd) if dd > 0.0 else 1.0
-    a0 = sol_u[0] + alpha * (sol_w[0] - sol_u[0])
-    bb = sol_u[1] + alpha * (sol_w[1] - sol_u[1])
-    cc = sol_u[2] + alpha * (sol_w[2] - sol_u[2])
-    amp = math.sqrt(bb * bb + cc * cc)
-    res[0] = (a0 + amp) * inv_r
-    res[1] = (a0 - amp) * inv_r
-    res[2] = 0.5 * math.atan2(cc, bb)
+            sse += (kappa[s] - _model(rows, s, npar, sol)) ** 2
+    amp = math.sqrt(sol[1] * sol[1] + sol[2] * sol[2])
+    res[0] = (sol[0] + amp) * inv_r
+    res[1] = (sol[0] - amp) * inv_r
+    res[2] = 0.5 * math.atan2(sol[2], sol[1])
     res[3] = used
     res[4] = math.sqrt(sse / used) * inv_r
-    res[6] = math.sqrt(sigma2) * radius
+    res[6] = math.sqrt(noise_ss / noise_dof) * radius if noise_dof > 0.0 else np.nan
 
 
 @njit(parallel=True, cache=True)
 def curvature_cga(points, query_points, query_normals, indptr, indices, radius, ndir, slab,
-                  min_points, min_spread, weighting, unit_norm, corrected, half_frequency,
+                  min_points, min_spread, weighted, unit_norm, corrected, half_frequency,
                   robust, k1, k2, d1, d2, n_samples, residual, n_neighbors, noise):
     """Fused CGA circle-fit estimator over query points with CSR neighbour lists.
 
@@ -468,8 +421,9 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
         ``indices[indptr[q]:indptr[q+1]]`` (the query point itself may be present; coincident
         points are skipped)
     radius : float, model units; slab, min_spread : fractions of ``radius``
-    weighting : WEIGHTS_NONE, WEIGHTS_DISTANCE or WEIGHTS_ADAPTIVE
+    weighted : bool, distance weights (1 - r^2 / radius^2)^WEIGHT_POWER, else equal weights
     unit_norm : bool, circle fits normalised by |t| = 1 (the paper) instead of t1 = 1
+    corrected, half_frequency, robust : bool, see :func:`meshcurv.principal_curvatures`
     Outputs k1, k2 (m,), d1, d2 (m, 3), n_samples, residual, n_neighbors, noise (m,) are written
     in place; NaN where no estimate is possible.
     """
@@ -483,18 +437,13 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
     nchunks = (m + CHUNK - 1) // CHUNK
     for c in prange(nchunks):
         acc = np.empty((nh, N_ACC))
-        kap_u = np.empty(nh)
-        kap_w = np.empty(nh)
-        rows_u = np.empty((nh, 5))
-        rows_w = np.empty((nh, 5))
-        var_u = np.empty(nh)
-        var_w = np.empty(nh)
+        kappa = np.empty(nh)
+        rows = np.empty((nh, 5))
         active = np.empty(nh)
         scratch = np.empty(nh)
         mat = np.empty((5, 5))
         rhs = np.empty(5)
-        sol_u = np.empty(5)
-        sol_w = np.empty(5)
+        sol = np.empty(5)
         ev = np.empty(3)
         tu = np.empty(3)
         tv = np.empty(3)
@@ -510,9 +459,9 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
                 for a in range(3):
                     n[a] /= nn
                 _estimate_one(points, indices, indptr[q], indptr[q + 1], x, n, radius, ndir,
-                              slab, min_points, min_spread, weighting, unit_norm, corrected,
-                              half_frequency, robust, ca, sa, acc, kap_u, kap_w, rows_u, rows_w, var_u, var_w,
-                              active, scratch, mat, rhs, sol_u, sol_w, ev, tu, tv, res)
+                              slab, min_points, min_spread, weighted, unit_norm, corrected,
+                              half_frequency, robust, ca, sa, acc, kappa, rows, active, scratch,
+                              mat, rhs, sol, ev, tu, tv, res)
             else:
                 for a in range(7):
                     res[a] = np.nan

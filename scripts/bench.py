@@ -1,0 +1,460 @@
+"""Speed of meshcurv against MeshLab's curvature filters, measured in the same run.
+
+Data: a torus and a sphere mesh at 100k and 1M vertices, and a 1M-point cloud (uniform random
+points on a torus, no faces). Radius: :func:`meshcurv.neighborhoods.default_radius`, the ball
+holding about 100 points. Methods:
+
+- ``meshcurv``: exact normals given; ``meshcurv (est.)``: normals estimated by PCA over the
+  ball and oriented (by the faces on meshes, by minimum-spanning-tree propagation on the cloud).
+- MeshLab ``compute_curvature_principal_directions_per_vertex`` with "Taubin approximation"
+  (1-ring), "Quadric Fitting" (2-ring) and "Scale Dependent Quadric Fitting" (SDQF, ball of the
+  same radius), called in this process on a ``MeshSet`` prepared beforehand.
+- MeshLab APSS (``compute_curvature_and_color_apss_per_vertex``) on the point set with the
+  given normals, support matched to the radius as in ``compare_meshlab.py``; in a child process
+  with a timeout, because it can abort the process.
+- libigl ``principal_curvature`` (quadric fit over the k-ring nearest the radius) when ``igl``
+  is installed.
+
+Reported per run: the median wall time of ``--repeat`` calls (compilation excluded: kernels are
+compiled or loaded from the numba cache first), vertices per second, the speed-up over MeshLab
+Taubin and SDQF on the same data (above 1 = faster than that method), and the peak resident
+memory of the call above what the process held before it, in bytes per vertex (outputs
+included). Peak memory comes from the kernel's high-water mark (``VmHWM``, reset through
+``/proc/self/clear_refs``), so it also counts memory that numba kernels and MeshLab allocate
+outside Python. Also: the time of ``import meshcurv`` and of the first call in a fresh process
+on a warm numba cache, and the split of a meshcurv call into its stages.
+
+Usage::
+
+    python scripts/bench.py                      # full run (several minutes)
+    python scripts/bench.py --quick              # small sizes, well under a minute
+    python scripts/bench.py --json bench.json    # also write all numbers as JSON
+"""
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+# glibc serves large blocks from a heap it keeps after they are freed unless this is fixed;
+# with it every block above 64 KiB is mapped and unmapped, so peak RSS measures each call alone.
+_MMAP_ENV = "MALLOC_MMAP_THRESHOLD_"
+
+TAUBIN, QF, SDQF = "Taubin approximation", "Quadric Fitting", "Scale Dependent Quadric Fitting"
+MESHLAB_METHODS = {"MeshLab Taubin": TAUBIN, "MeshLab QF": QF, "MeshLab SDQF": SDQF}
+
+
+# ---------------------------------------------------------------------------------------------
+# Data
+# ---------------------------------------------------------------------------------------------
+
+def torus_mesh(n_vertices, major=2.0, minor=0.5):
+    """Regular torus grid with about ``n_vertices`` vertices and square cells.
+
+    Returns vertices (n, 3), faces (m, 3) int64 (outward winding), exact normals (n, 3).
+    """
+    from meshcurv import surfaces
+
+    n_minor = max(8, int(round(np.sqrt(n_vertices * minor / major))))
+    n_major = max(8, int(round(n_vertices / n_minor)))
+    s = surfaces.torus(major, minor, n_major=n_major, n_minor=n_minor)
+    return s.vertices, s.faces, s.normals
+
+
+def sphere_mesh(n_vertices, radius=1.0):
+    """Unit "cube sphere": the six faces of a cube, each an equal-angle grid, on the sphere.
+
+    Returns vertices (n, 3) with n close to ``n_vertices``, faces (m, 3) int64 (outward
+    winding) and exact normals (n, 3). Cell areas vary by less than 1.5x (unlike a UV sphere).
+    """
+    m = max(2, int(round(np.sqrt((n_vertices - 2) / 6.0))))
+    # grid (m+1) x (m+1) per cube face in the angles a, b in [-pi/4, pi/4]
+    t = np.tan(np.linspace(-np.pi / 4, np.pi / 4, m + 1))
+    a, b = (g.ravel() for g in np.meshgrid(t, t, indexing="ij"))
+    one = np.ones_like(a)
+    blocks = []
+    for axis in range(3):
+        for sign in (1.0, -1.0):
+            p = np.empty((len(a), 3))
+            p[:, axis] = sign * one
+            p[:, (axis + 1) % 3] = a
+            p[:, (axis + 2) % 3] = b
+            blocks.append(p)
+    i, j = np.meshgrid(np.arange(m), np.arange(m), indexing="ij")
+    c00 = (i * (m + 1) + j).ravel()
+    c10, c01, c11 = c00 + (m + 1), c00 + 1, c00 + m + 2
+    quad = np.concatenate([np.column_stack([c00, c10, c11]), np.column_stack([c00, c11, c01])])
+    faces = np.concatenate([quad + k * (m + 1) ** 2 for k in range(6)])
+    p = np.concatenate(blocks)
+    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    # weld the copies of the cube's edges and corners
+    _, first, inverse = np.unique(np.round(p * 1e9).astype(np.int64), axis=0, return_index=True,
+                                  return_inverse=True)
+    keep = np.sort(first)
+    new_index = np.empty(len(p), dtype=np.int64)
+    new_index[keep] = np.arange(len(keep))
+    faces = new_index[first[inverse.ravel()]][faces]
+    v = p[keep] * radius
+    normals = p[keep]
+    fn = np.cross(v[faces[:, 1]] - v[faces[:, 0]], v[faces[:, 2]] - v[faces[:, 0]])
+    flip = np.einsum("ij,ij->i", fn, v[faces].sum(axis=1)) < 0
+    faces[flip] = faces[flip][:, ::-1]
+    return v, faces, normals
+
+
+def torus_cloud(n_points, major=2.0, minor=0.5, seed=0):
+    """``n_points`` uniform random points on a torus (area-uniform); points (n, 3), normals (n, 3)."""
+    rng = np.random.default_rng(seed)
+    u = np.empty(0)
+    w = np.empty(0)
+    while len(u) < n_points:
+        k = int(1.3 * (n_points - len(u))) + 16
+        uu = rng.uniform(0, 2 * np.pi, k)
+        ww = rng.uniform(0, 2 * np.pi, k)
+        # the area element is proportional to major + minor cos w
+        keep = rng.uniform(0, major + minor, k) < major + minor * np.cos(ww)
+        u = np.concatenate([u, uu[keep]])
+        w = np.concatenate([w, ww[keep]])
+    u, w = u[:n_points], w[:n_points]
+    normals = np.column_stack([np.cos(w) * np.cos(u), np.cos(w) * np.sin(u), np.sin(w)])
+    ring = major + minor * np.cos(w)
+    v = np.column_stack([ring * np.cos(u), ring * np.sin(u), minor * np.sin(w)])
+    return v, None, normals
+
+
+def datasets(quick):
+    """(name, vertices, faces or None, exact normals) of the benchmark, smallest first."""
+    small, large = (4000, 16000) if quick else (100_000, 1_000_000)
+    out = []
+    for n in (small, large):
+        out.append((f"torus {_count(n)}", *torus_mesh(n)))
+        out.append((f"sphere {_count(n)}", *sphere_mesh(n)))
+    out.append((f"cloud {_count(large)}", *torus_cloud(large)))
+    return out
+
+
+def _count(n):
+    return f"{n // 1_000_000}M" if n % 1_000_000 == 0 else f"{n // 1000}k"
+
+
+# ---------------------------------------------------------------------------------------------
+# Measurement
+# ---------------------------------------------------------------------------------------------
+
+def _status_kib(field):
+    with open("/proc/self/status") as fh:
+        for line in fh:
+            if line.startswith(field + ":"):
+                return int(line.split()[1])
+    return 0
+
+
+def measure(fn, repeat):
+    """Median wall time (s) of ``repeat`` calls of ``fn()`` and the peak extra memory (bytes).
+
+    The peak is the high-water mark of the resident set during the first call minus the
+    resident set just before it.
+    """
+    times = []
+    peak = float("nan")
+    for i in range(repeat):
+        if i == 0:
+            try:
+                with open("/proc/self/clear_refs", "w") as fh:
+                    fh.write("5")
+                before = _status_kib("VmRSS")
+            except OSError:
+                before = None
+        t0 = time.perf_counter()
+        result = fn()
+        times.append(time.perf_counter() - t0)
+        if i == 0 and before is not None:
+            peak = 1024.0 * max(0, _status_kib("VmHWM") - before)
+        del result
+    return float(np.median(times)), peak
+
+
+def meshcurv_call(v, f, normals, radius, estimate):
+    """A closure running meshcurv with the given normals, or estimating and orienting them."""
+    import meshcurv
+
+    if estimate:
+        return lambda: meshcurv.principal_curvatures(v, f, radius=radius, normal_estimation="pca")
+    return lambda: meshcurv.principal_curvatures(v, f, normals=normals, radius=radius)
+
+
+def meshlab_call(v, f, radius, method):
+    """A closure running one MeshLab curvature filter on a MeshSet prepared beforehand."""
+    import pymeshlab
+
+    ms = pymeshlab.MeshSet()
+    ms.add_mesh(pymeshlab.Mesh(v, f))
+
+    def run():
+        ms.compute_curvature_principal_directions_per_vertex(
+            method=method, curvcolormethod="Mean Curvature", scale=pymeshlab.PureValue(radius),
+            autoclean=False)
+    return run
+
+
+def igl_call(v, f, radius):
+    """A closure running libigl's principal_curvature, or None when igl is not installed."""
+    try:
+        import igl
+    except ImportError:
+        return None
+    # libigl's radius counts rings of edges: the ring reaching about the ball radius
+    edge = np.linalg.norm(v[f[:, 0]] - v[f[:, 1]], axis=1).mean()
+    rings = max(2, int(round(radius / edge)))
+    return lambda: igl.principal_curvature(v, f, rings)
+
+
+def apss_in_child(v, normals, radius, repeat, timeout):
+    """Time MeshLab APSS in a child process; returns (seconds, peak bytes, status)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        inp = os.path.join(tmp, "in.npz")
+        np.savez(inp, vertices=v, normals=normals, radius=radius, repeat=repeat)
+        try:
+            p = subprocess.run([sys.executable, os.path.abspath(__file__), "--apss-worker", inp],
+                               capture_output=True, text=True, timeout=timeout)
+        except subprocess.TimeoutExpired:
+            return float("nan"), float("nan"), f"timeout ({timeout:.0f} s)"
+    if p.returncode != 0:
+        why = f"crash (signal {-p.returncode})" if p.returncode < 0 else f"exit {p.returncode}"
+        return float("nan"), float("nan"), why
+    out = json.loads(p.stdout.strip().splitlines()[-1])
+    return out["seconds"], out["peak_bytes"], "ok"
+
+
+def _apss_worker(inp):
+    """Child process: run APSS on the point set in ``inp`` and print the timing as JSON."""
+    import pymeshlab
+    from scipy.spatial import cKDTree
+
+    d = np.load(inp)
+    v, normals, radius, repeat = d["vertices"], d["normals"], float(d["radius"]), int(d["repeat"])
+    # APSS support is filterscale x a per-point radius d16 / 2 (MeshLab's computeVertexRaddi)
+    d16 = cKDTree(v).query(v, min(16, len(v)), workers=-1)[0][:, -1]
+    filterscale = float(radius / np.mean(0.5 * d16))
+    ms = pymeshlab.MeshSet()
+    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=v, v_normals_matrix=normals))
+
+    def run():
+        ms.compute_curvature_and_color_apss_per_vertex(filterscale=filterscale, curvaturetype="K1")
+    seconds, peak = measure(run, repeat)
+    print(json.dumps(dict(seconds=seconds, peak_bytes=peak)))
+
+
+_FIRST_CALL = r"""
+import json, sys, time
+t0 = time.perf_counter()
+import meshcurv
+t1 = time.perf_counter()
+sys.path.insert(0, {here!r})
+from bench import torus_mesh, torus_cloud
+v, f, n = torus_mesh(2000)
+t2 = time.perf_counter()
+meshcurv.principal_curvatures(v, f, normals=n)
+t3 = time.perf_counter()
+v, _, _ = torus_cloud(2000)
+t4 = time.perf_counter()
+meshcurv.principal_curvatures(v)
+t5 = time.perf_counter()
+print(json.dumps(dict(import_s=t1 - t0, first_mesh_s=t3 - t2, first_cloud_s=t5 - t4)))
+"""
+
+
+def first_call_times():
+    """``import meshcurv`` and first calls (mesh, cloud) in a fresh process, warm numba cache."""
+    code = _FIRST_CALL.format(here=os.path.dirname(os.path.abspath(__file__)))
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    if p.returncode != 0:
+        raise RuntimeError(p.stderr)
+    return json.loads(p.stdout.strip().splitlines()[-1])
+
+
+def stage_times(v, f, normals, radius, repeat):
+    """Seconds spent in each stage of a meshcurv call, timed one stage at a time.
+
+    Stages: neighbour lists (k-ring on meshes, grid ball query on clouds), PCA normals over
+    those lists, their orientation (MST on clouds), and the curvature kernel with given normals.
+    """
+    from meshcurv import kernels, neighborhoods as nb, normals as nrm
+
+    n = len(v)
+    q = np.arange(n, dtype=np.int64)
+    out = {}
+    if f is not None:
+        adjacency = nb.edge_adjacency(f, n)
+        work = nb.KringWork(n)
+        out["neighbours (k-ring)"] = measure(lambda: nb.kring_neighbors(v, adjacency, radius, q,
+                                                                          work), repeat)[0]
+        indptr, indices = nb.kring_neighbors(v, adjacency, radius, q, work)
+    else:
+        grid = nb.ball_grid(v, radius)
+        out["neighbours (ball)"] = measure(lambda: nb.ball_neighbors(grid, None, v, radius),
+                                           repeat)[0]
+        indptr, indices = nb.ball_neighbors(grid, None, v, radius)
+    out["PCA normals"] = measure(lambda: nrm.pca_normals(v, v, indptr, indices, radius), repeat)[0]
+    if f is None:
+        est = nrm.pca_normals(v, v, indptr, indices, radius)
+        out["orientation (MST)"] = measure(lambda: nrm.orient_mst(v, est.copy()), 1)[0]
+    import meshcurv
+
+    unit = np.ascontiguousarray(normals, dtype=np.float64)
+    kind = "kring" if f is not None else "ball"
+    out["whole call, normals given"] = measure(
+        lambda: meshcurv.principal_curvatures(v, f, normals=unit, radius=radius,
+                                              neighborhood=kind), repeat)[0]
+    out["neighbours per vertex"] = float(np.diff(indptr).mean())
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# Run and report
+# ---------------------------------------------------------------------------------------------
+
+def run(quick=False, repeat=3, apss_timeout=900.0, methods=None, stages=True):
+    """Run the benchmark; returns a dict with ``rows`` (one per data set and method) and more."""
+    from meshcurv.neighborhoods import default_radius
+
+    import meshcurv
+    import numba
+
+    warm_v, warm_f, warm_n = torus_mesh(2000)
+    for est in (False, True):
+        meshcurv_call(warm_v, warm_f, warm_n, None, est)()
+    meshcurv.principal_curvatures(warm_v)
+    report = dict(threads=numba.get_num_threads(), cpus=os.cpu_count(), quick=quick,
+                  repeat=repeat, rows=[], stages={}, first_call=first_call_times())
+    for name, v, f, exact_normals in datasets(quick):
+        n = len(v)
+        radius = default_radius(v)
+        # one call per method on the 1M sets keeps the run short; MeshLab SDQF alone takes minutes
+        rep = repeat if n <= 200_000 else max(1, min(repeat, 2))
+        calls = [("meshcurv", meshcurv_call(v, f, exact_normals, radius, False)),
+                 ("meshcurv (est.)", meshcurv_call(v, f, exact_normals, radius, True))]
+        if f is not None:
+            calls += [(label, meshlab_call(v, f, radius, m)) for label, m in MESHLAB_METHODS.items()]
+            igl = igl_call(v, f, radius)
+            if igl is not None:
+                calls.append(("libigl", igl))
+        for label, fn in calls:
+            if methods and not any(label.startswith(m) for m in methods):
+                continue
+            seconds, peak = measure(fn, 1 if label == "MeshLab SDQF" and n > 200_000 else rep)
+            report["rows"].append(dict(data=name, n=n, radius=radius, method=label,
+                                       seconds=seconds, peak_bytes=peak, status="ok"))
+            _progress(report["rows"][-1])
+        if f is not None and (not methods or any("APSS".startswith(m) or m == "APSS"
+                                                 for m in methods)):
+            seconds, peak, status = apss_in_child(v, exact_normals, radius, 1, apss_timeout)
+            report["rows"].append(dict(data=name, n=n, radius=radius, method="MeshLab APSS",
+                                       seconds=seconds, peak_bytes=peak, status=status))
+            _progress(report["rows"][-1])
+        if stages and n >= (16000 if quick else 1_000_000):
+            report["stages"][name] = stage_times(v, f, exact_normals, radius, rep)
+    _add_ratios(report)
+    return report
+
+
+def _progress(row):
+    print(f"  {row['data']:<12} {row['method']:<18} {row['seconds']:8.3f} s  {row['status']}",
+          file=sys.stderr, flush=True)
+
+
+def _add_ratios(report):
+    """Speed-ups over MeshLab Taubin and SDQF on the same data set, and 1M / 100k time ratios."""
+    by = {(r["data"], r["method"]): r for r in report["rows"]}
+    for r in report["rows"]:
+        for ref, key in (("MeshLab Taubin", "vs_taubin"), ("MeshLab SDQF", "vs_sdqf")):
+            base = by.get((r["data"], ref))
+            r[key] = base["seconds"] / r["seconds"] if base and r["seconds"] > 0 else float("nan")
+        r["vertices_per_s"] = r["n"] / r["seconds"] if r["seconds"] > 0 else float("nan")
+        r["bytes_per_vertex"] = r["peak_bytes"] / r["n"]
+    scaling = {}
+    names = sorted({r["data"] for r in report["rows"]}, key=lambda s: s.split()[0])
+    for shape in ("torus", "sphere"):
+        sets = [s for s in names if s.startswith(shape)]
+        if len(sets) == 2:
+            small, large = sorted(sets, key=lambda s: by_n(report, s))
+            for r in report["rows"]:
+                if r["data"] == large and (small, r["method"]) in by:
+                    scaling[f"{shape} {r['method']}"] = dict(
+                        size_ratio=r["n"] / by[(small, r["method"])]["n"],
+                        time_ratio=r["seconds"] / by[(small, r["method"])]["seconds"])
+    report["scaling"] = scaling
+
+
+def by_n(report, name):
+    return next(r["n"] for r in report["rows"] if r["data"] == name)
+
+
+def format_table(report):
+    """The report as Markdown tables."""
+    lines = [f"{report['threads']} threads on {report['cpus']} CPUs; median of "
+             f"{report['repeat']} calls (1M sets: fewer), compilation excluded.", "",
+             "| data | method | time (s) | vertices/s | vs Taubin | vs SDQF | peak extra (B/vertex) |",
+             "|---|---|---:|---:|---:|---:|---:|"]
+    for r in report["rows"]:
+        if r["status"] != "ok":
+            lines.append(f"| {r['data']} | {r['method']} | {r['status']} | | | | |")
+            continue
+        lines.append(f"| {r['data']} | {r['method']} | {r['seconds']:.3f} | "
+                     f"{r['vertices_per_s'] / 1e3:,.0f}k | {_ratio(r['vs_taubin'])} | "
+                     f"{_ratio(r['vs_sdqf'])} | {r['bytes_per_vertex']:,.0f} |")
+    lines += ["", "Speed-up = time of the MeshLab method / time of this method on the same data "
+              "(above 1: faster).", ""]
+    if report["scaling"]:
+        lines += ["| time(large) / time(small) | size ratio | time ratio |", "|---|---:|---:|"]
+        for k, s in report["scaling"].items():
+            lines.append(f"| {k} | {s['size_ratio']:.1f} | {s['time_ratio']:.1f} |")
+        lines.append("")
+    fc = report["first_call"]
+    lines += [f"Fresh process, warm numba cache: `import meshcurv` {fc['import_s']:.2f} s, first "
+              f"call on a mesh {fc['first_mesh_s']:.2f} s, on a point cloud "
+              f"{fc['first_cloud_s']:.2f} s.", ""]
+    for name, st in report["stages"].items():
+        lines += [f"Stages on {name} (each timed alone):", "", "| stage | s |", "|---|---:|"]
+        for k, val in st.items():
+            lines.append(f"| {k} | {val:.3f} |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def _ratio(x):
+    return "" if not np.isfinite(x) else f"{x:.2f}x"
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--quick", action="store_true", help="small sizes (4k/16k), for smoke tests")
+    ap.add_argument("--repeat", type=int, default=3, help="calls per measurement (median)")
+    ap.add_argument("--json", metavar="PATH", help="also write the results as JSON")
+    ap.add_argument("--methods", nargs="*", help="only methods whose label starts with these")
+    ap.add_argument("--no-stages", action="store_true", help="skip the per-stage split")
+    ap.add_argument("--apss-timeout", type=float, default=900.0, help="seconds per APSS run")
+    ap.add_argument("--apss-worker", metavar="NPZ", help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.apss_worker:
+        _apss_worker(args.apss_worker)
+        return
+    if os.environ.get(_MMAP_ENV) is None:
+        # restart with a fixed mmap threshold so that peak memory is measured per call
+        env = dict(os.environ, **{_MMAP_ENV: "65536"})
+        os.execve(sys.executable, [sys.executable, os.path.abspath(__file__)] + sys.argv[1:], env)
+    report = run(quick=args.quick, repeat=args.repeat, apss_timeout=args.apss_timeout,
+                 methods=args.methods, stages=not args.no_stages)
+    print(format_table(report))
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump(report, fh, indent=1)
+
+
+if __name__ == "__main__":
+    main()

@@ -286,7 +286,7 @@ def run_case(case, methods, timeout):
             r = run_meshcurv(m.vertices, m.faces, radius)
         elif method == "meshcurv (auto R)":
             t0 = time.perf_counter()
-            radius = auto_radius(m.vertices, m.faces)
+            radius = auto_radius(m.vertices, m.faces, **supported_settings(RECOMMENDED))
             r = run_meshcurv(m.vertices, m.faces, radius, **RECOMMENDED)
             r["seconds"] = time.perf_counter() - t0
         else:
@@ -297,6 +297,71 @@ def run_case(case, methods, timeout):
                          seconds=r["seconds"], status=r["status"], n=int(mask.sum()), **stats))
         fields[method] = (r["k1"], r["k2"])
     return rows, fields
+
+
+# meshcurv options measured one at a time against the recommended settings (same radius).
+SETTINGS_STUDY = {
+    "none, PCA normals (recommended)": dict(weighting="none", normal_estimation="pca"),
+    "none, face normals": dict(weighting="none", normal_estimation="faces"),
+    "distance, PCA normals": dict(weighting="distance", normal_estimation="pca"),
+    "distance, face normals": dict(weighting="distance", normal_estimation="faces"),
+    "none, PCA, slab 0.1": dict(weighting="none", normal_estimation="pca", slab=0.1),
+    "none, PCA, slab 0.5": dict(weighting="none", normal_estimation="pca", slab=0.5),
+    "none, PCA, 16 directions": dict(weighting="none", normal_estimation="pca", n_directions=16),
+    "none, PCA, robust off": dict(weighting="none", normal_estimation="pca", robust=False),
+    "none, PCA, section blend off": dict(weighting="none", normal_estimation="pca",
+                                         section_blend=False),
+    "none, PCA, unit circle norm.": dict(weighting="none", normal_estimation="pca",
+                                         circle_normalization="unit"),
+}
+
+# Radii of the radius study, as multiples of each case's shared radius.
+RADIUS_FACTORS = (0.5, 0.75, 1.0, 1.5)
+
+
+def mean_error(k1, k2, surf, mask):
+    """Mean (|dk1| + |dk2|) / 2 over ``mask`` (NaN estimates skipped)."""
+    st = error_stats(k1, k2, surf, mask)
+    return 0.5 * (st["mean_dk1"] + st["mean_dk2"])
+
+
+def settings_study(cases):
+    """meshcurv under each entry of SETTINGS_STUDY; rows of (case, setting, error)."""
+    import meshcurv
+
+    rows = []
+    for case in cases:
+        m = case.mesh
+        mask = m.border_distance >= case.radius
+        for name, settings in SETTINGS_STUDY.items():
+            res = meshcurv.principal_curvatures(m.vertices, m.faces, radius=case.radius,
+                                                **supported_settings(settings))
+            rows.append(dict(surface=case.surface, sampling=case.sampling, noise=case.noise,
+                             setting=name, error=mean_error(res.k1, res.k2, m, mask)))
+    return rows
+
+
+def radius_study(cases):
+    """Recommended meshcurv at fixed multiples of the shared radius and at auto_radius."""
+    import meshcurv
+    from meshcurv.autoradius import auto_radius
+
+    rows = []
+    for case in cases:
+        m = case.mesh
+        mask = m.border_distance >= case.radius
+        row = dict(surface=case.surface, sampling=case.sampling, noise=case.noise,
+                   radius=case.radius)
+        for factor in RADIUS_FACTORS:
+            res = meshcurv.principal_curvatures(m.vertices, m.faces, radius=factor * case.radius,
+                                                **supported_settings(RECOMMENDED))
+            row[factor] = mean_error(res.k1, res.k2, m, mask)
+        auto = auto_radius(m.vertices, m.faces, **supported_settings(RECOMMENDED))
+        res = meshcurv.principal_curvatures(m.vertices, m.faces, radius=auto,
+                                            **supported_settings(RECOMMENDED))
+        row["auto"], row["auto_radius"] = mean_error(res.k1, res.k2, m, mask), auto
+        rows.append(row)
+    return rows
 
 
 BALL_METHODS = ("meshcurv", "meshcurv (defaults)", "meshcurv (auto R)", "SDQF", "APSS")
@@ -415,12 +480,19 @@ def _view(ax, v, f, values, title, vmin=-1.0, vmax=1.0, cmap="jet", elev=25, azi
     ax.set_ylim(mid[1] - half, mid[1] + half)
     ax.set_zlim(mid[2] - half, mid[2] + half)
     ax.view_init(elev=elev, azim=azim)
+    ax.set_box_aspect((1, 1, 1), zoom=1.35)
     ax.set_axis_off()
-    ax.set_title(title, fontsize=9)
+    ax.set_title(title, fontsize=9, y=0.95)
 
 
-def shape_index_picture(path, v, f, panels, suptitle, **view):
-    """Side-by-side shape-index pictures; ``panels`` is a list of (title, k1, k2)."""
+def shape_index_picture(path, v, f, panels, suptitle, y_up=False, **view):
+    """Side-by-side shape-index pictures; ``panels`` is a list of (title, k1, k2).
+
+    ``y_up``: the mesh is stored with y up (scans, the pymeshlab samples); it is turned so that
+    y points up in the picture.
+    """
+    if y_up:
+        v = np.column_stack([v[:, 0], -v[:, 2], v[:, 1]])
     import matplotlib
 
     matplotlib.use("Agg")
@@ -428,14 +500,15 @@ def shape_index_picture(path, v, f, panels, suptitle, **view):
 
     from meshcurv.shape import shape_index
 
-    fig = plt.figure(figsize=(3.2 * len(panels), 3.6))
+    fig = plt.figure(figsize=(3.0 * len(panels), 3.2))
     for i, (title, k1, k2) in enumerate(panels):
         ax = fig.add_subplot(1, len(panels), i + 1, projection="3d")
         with np.errstate(invalid="ignore"):
             _view(ax, v, f, shape_index(k1, k2), title, **view)
-    fig.suptitle(suptitle + "  (shape index: blue -1 cup, green 0 saddle, red +1 cap)", fontsize=9)
-    fig.tight_layout()
-    fig.savefig(path, dpi=80)
+    fig.suptitle(suptitle + "\nshape index: blue -1 cup, green 0 saddle, red +1 cap; "
+                 "grey: no estimate", fontsize=9)
+    fig.subplots_adjust(left=0, right=1, bottom=0, top=0.86, wspace=0)
+    fig.savefig(path, dpi=90)
     plt.close(fig)
 
 
@@ -512,7 +585,57 @@ def win_summary(rows):
     return "\n".join(out)
 
 
-def write_report(path, mode, rows, real, pictures, seconds):
+def settings_table(rows):
+    """Markdown table: one row per case, one column per meshcurv setting; best value in bold."""
+    names = list(dict.fromkeys(r["setting"] for r in rows))
+    keys = list(dict.fromkeys((r["surface"], r["sampling"], r["noise"]) for r in rows))
+    out = ["| surface | noise | " + " | ".join(names) + " |", "|---|---|" + "---|" * len(names)]
+    for key in keys:
+        by = {r["setting"]: r["error"] for r in rows
+              if (r["surface"], r["sampling"], r["noise"]) == key}
+        best = np.nanmin([by[n] for n in names])
+        cells = [f"**{_fmt(by[n])}**" if by[n] == best else _fmt(by[n]) for n in names]
+        out.append(f"| {key[0]} ({key[1]}) | {key[2] * 100:.1f} % | " + " | ".join(cells) + " |")
+    return "\n".join(out)
+
+
+def settings_winners(rows):
+    """Per noise level: each setting's error relative to the recommended one, averaged
+    (geometric mean over the cases); < 1 means better than the recommended settings."""
+    names = list(dict.fromkeys(r["setting"] for r in rows))
+    ref = names[0]
+    out = ["| noise | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
+    for noise in sorted({r["noise"] for r in rows}):
+        cells = []
+        for n in names:
+            ratios = []
+            for key in {(r["surface"], r["sampling"]) for r in rows if r["noise"] == noise}:
+                by = {r["setting"]: r["error"] for r in rows
+                      if (r["surface"], r["sampling"], r["noise"]) == (*key, noise)}
+                ratios.append(by[n] / by[ref])
+            cells.append(_fmt(float(np.exp(np.mean(np.log(ratios)))), 2))
+        best = min(cells, key=float)
+        cells = [f"**{c}**" if c == best else c for c in cells]
+        out.append(f"| {noise * 100:.1f} % | " + " | ".join(cells) + " |")
+    return "\n".join(out)
+
+
+def radius_table(rows):
+    """Markdown table of the radius study (mean (|dk1| + |dk2|) / 2)."""
+    head = " | ".join(f"{f:g} R" for f in RADIUS_FACTORS)
+    out = [f"| surface | noise | R | {head} | auto | auto radius |",
+           "|---|---|---|" + "---|" * (len(RADIUS_FACTORS) + 2)]
+    for r in rows:
+        vals = [r[f] for f in RADIUS_FACTORS] + [r["auto"]]
+        best = np.nanmin(vals)
+        cells = [f"**{_fmt(x)}**" if x == best else _fmt(x) for x in vals]
+        out.append(f"| {r['surface']} ({r['sampling']}) | {r['noise'] * 100:.1f} % "
+                   f"| {_fmt(r['radius'], 3)} | " + " | ".join(cells)
+                   + f" | {_fmt(r['auto_radius'], 3)} |")
+    return "\n".join(out)
+
+
+def write_report(path, mode, rows, real, pictures, seconds, study=(), radii=()):
     clean = [r for r in rows if r["noise"] == 0]
     noisy = [r for r in rows if r["noise"] > 0]
     lines = [
@@ -556,6 +679,23 @@ def write_report(path, mode, rows, real, pictures, seconds):
         "![error vs noise](compare_error_vs_noise.png)",
         "",
     ]
+    if study:
+        lines += ["## meshcurv options under noise", "",
+                  "Mean (|Δk1| + |Δk2|) / 2 of meshcurv with one option changed at a time, same "
+                  "radius and vertices as above (`weighting`: \"none\" = equal weights, "
+                  "\"distance\" = (1 - r²/R²)⁴; normals from a PCA plane fit over the ball or "
+                  "from the faces). Best per row in bold.", "",
+                  settings_table(study), "",
+                  "Error relative to the recommended settings (first column), geometric mean "
+                  "over the surfaces of each noise level; < 1 is better:", "",
+                  settings_winners(study), ""]
+    if radii:
+        lines += ["## Fixed radii and `radius=\"auto\"`", "",
+                  "Recommended meshcurv settings at multiples of the shared radius R of each "
+                  "case and at the radius of `meshcurv.autoradius.auto_radius` (chosen from the "
+                  "sampling density and a noise estimate, without the ground truth). Mean "
+                  "(|Δk1| + |Δk2|) / 2 on the same vertices; best per row in bold.", "",
+                  radius_table(radii), ""]
     if real:
         lines += ["## Sample meshes shipped with pymeshlab (no ground truth)", "",
                   "Agreement with meshcurv; curvature differences in units of meshcurv's median "
@@ -614,10 +754,19 @@ def main(argv=None):
             shape_index_picture(os.path.join(args.out, name), m.vertices, m.faces,
                                 [("meshcurv", *fields["meshcurv"]), ("MeshLab Taubin", *fields["Taubin"]),
                                  ("MeshLab SDQF", *fields["SDQF"]), ("truth", m.k1, m.k2)],
-                                f"{case.label}, noise {case.noise * 100:.1f} %")
+                                f"{case.label}, noise {case.noise * 100:.1f} %",
+                                elev=50 if case.surface == "torus" else 35)
             pictures.append(name)
+    study, radii = [], []
+    if mode != "smallest":
+        cases = build_cases(mode)
+        study = settings_study(cases)
+        radii = radius_study(cases)
+        print("settings and radius studies done", flush=True)
     with open(os.path.join(args.out, f"comparison_{mode}.json"), "w") as fh:
-        json.dump(rows, fh, indent=1)
+        json.dump(dict(rows=rows, settings_study=study,
+                       radius_study=[{str(k): v for k, v in r.items()} for r in radii]),
+                  fh, indent=1)
     if not args.no_pictures and mode != "smallest":
         error_vs_noise_plot(os.path.join(args.out, "compare_error_vs_noise.png"), rows)
 
@@ -638,7 +787,8 @@ def main(argv=None):
                                 rr["name"], **_camera(fname))
             pictures.append(name)
     report = "comparison.md" if mode == "full" else f"comparison_{mode}.md"
-    write_report(os.path.join(args.out, report), mode, rows, real, pictures, time.perf_counter() - t0)
+    write_report(os.path.join(args.out, report), mode, rows, real, pictures,
+                 time.perf_counter() - t0, study, radii)
     print("wrote", os.path.join(args.out, report))
     return rows, real
 
@@ -646,8 +796,8 @@ def main(argv=None):
 def _camera(fname):
     """Views that show the sample meshes' fronts (they are stored y-up)."""
     if "bunny" in fname:
-        return dict(elev=10, azim=-80)
-    return dict(elev=80, azim=-90)
+        return dict(y_up=True, elev=10, azim=-70)
+    return dict(y_up=True, elev=10, azim=-90)
 
 
 if __name__ == "__main__" and len(sys.argv) == 4 and sys.argv[1] == "--worker":

@@ -3,26 +3,32 @@
 The cloud is cut into square tiles of side ``tile_size`` in x, y (columns, unbounded in z). A tile
 task gets the tile's own points plus every point within the halo (``>= radius``, which is also the
 PCA-normal radius) of the tile, in input order, and estimates curvature at its own points only
-(``principal_curvatures(..., query=own)``). Because the neighbour lists, the tangent frames and the
-normals of the own points then see exactly what a whole-cloud run sees, a tile's values equal the
-untiled run's when the orientation is well defined per point (given normals, or a viewpoint).
+(``principal_curvatures(..., query=own)``). The neighbour lists of the own points then hold the
+same points in the same order as in a whole-cloud run, so a tile's values are bit for bit those
+of the untiled run with the same normals.
 
 Pipeline, every stage resumable from a work folder (``OUT.meshcurv-work`` next to the output):
 
-1. scatter: tasks read ranges of the input (chunk coordinates) and write, per tile they touch,
-   a piece ``pieces/t_IX_IY/cNNNNNN.npz`` (global index, xyz, own flag, normals if given);
-2. tiles: one task per tile loads its pieces (tile + halo only), estimates, writes its results
-   per input chunk ``results/t_IX_IY/cNNNNNN.npz`` and then a ``done.json`` marker;
-3. orientation: for ``orientation="mst"`` tiles are made to agree in their overlaps (below);
+1. scatter: tasks read ranges of the input (chunks of ``chunk_size`` points) and write, per tile
+   they touch, a piece ``pieces/t_IX_IY/cNNNNNN.npz`` (global index, xyz, own flag, normals if
+   the input has them);
+2. normals (``orientation="mst"`` only): one task per tile estimates PCA normals over tile + halo,
+   orients them by MST propagation inside the tile and stores them (``normals/t_IX_IY.npz``); the
+   driver then decides one flip per tile so that tiles agree in their overlaps (below);
+3. curvature: one task per tile loads its pieces (tile + halo only) and the tile's normals,
+   estimates at its own points and writes the results per input chunk
+   (``results/t_IX_IY/cNNNNNN.npz``) and then a ``done.json`` marker;
 4. write: the driver streams the input once more and writes the output in input order, through
    a temporary file renamed at the end (never a partial output). The work folder is removed.
 
 A rerun with the same input and parameters skips finished chunks and tiles; other parameters or a
-changed input start afresh.
+changed input start afresh. Memory of a tile task is bounded by the points of one tile + halo
+(about ``density * (tile_size + 2 * halo)^2``); the driver holds one chunk at a time.
 
 Normal orientation across tiles
 -------------------------------
-- given normals (NormalX.. / nx.. in the file, ``normals=`` in memory): used as they are;
+- given normals (NormalX.. / nx.. in the file, ``normals=`` in memory): used as they are; the
+  result equals the untiled run with those normals;
 - ``orientation=(x, y, z)`` viewpoint: every normal is flipped towards that scanner position,
   so tiles agree by construction and the result equals the untiled run;
 - ``orientation="mst"``: each tile orients its tile + halo by minimum-spanning-tree propagation
@@ -30,9 +36,9 @@ Normal orientation across tiles
   each pair of adjacent tiles votes ``sum(n_A . n_B)`` over their shared points; the driver then
   flips whole tiles along a maximum spanning tree of the tile graph (strongest overlaps first)
   and finally flips each connected group of tiles so its normals point away from its centroid on
-  average, the rule ``orient_mst`` applies to a whole cloud. Flipping a tile's normal maps its
-  results exactly: ``k1, k2, d1, d2, n -> -k2, -k1, d2, d1, -n``. Signs then agree with an
-  untiled MST run wherever the propagation itself agrees (smooth, well-sampled surfaces).
+  average, the rule ``orient_mst`` applies to a whole cloud. The curvature pass runs with the
+  flipped normals, so its values equal an untiled run with the same normals; the normals agree
+  with an untiled MST run wherever the propagation itself agrees (smooth, well-sampled surfaces).
 
 >>> from meshcurv.tiled import annotate_tiled                                  # doctest: +SKIP
 >>> annotate_tiled("big.laz", "big_curv.laz", radius=0.5, tile_size=50.0,
@@ -40,7 +46,6 @@ Normal orientation across tiles
 """
 
 import contextlib
-import dataclasses
 import json
 import os
 import shutil
@@ -59,6 +64,9 @@ __all__ = ["TileError", "TiledReport", "TileGrid", "annotate_tiled", "principal_
 # even after the rounding of (x - origin) / tile_size.
 _HALO_MARGIN = 1e-6
 
+# Keywords of principal_curvatures that the tiled run sets itself.
+_RESERVED = ("vertices", "faces", "normals", "radius", "orientation", "query", "progress")
+
 
 class TileError(RuntimeError):
     """A tile (or an input chunk) that failed on a worker; the message names the tile and file."""
@@ -76,13 +84,21 @@ class TileGrid:
     tile_size: float
     halo: float
 
+    @classmethod
+    def for_radius(cls, origin, tile_size, radius):
+        """Grid whose halo covers ``radius`` with a margin against rounding."""
+        # the absolute term covers the rounding of (x - origin) / tile_size, ~1e-16 tile sizes
+        halo = radius * (1 + _HALO_MARGIN) + 1e-9 * tile_size
+        return cls(origin=(float(origin[0]), float(origin[1])), tile_size=float(tile_size),
+                   halo=float(halo))
+
     def own_keys(self, xyz):
-        """(k, 2) int64 tile index of each point's own tile."""
+        """(k, 2) int64 tile index of each point's own tile; ``xyz`` is (k, 3) float64."""
         o = np.asarray(self.origin, dtype=np.float64)
         return np.floor((xyz[:, :2] - o) / self.tile_size).astype(np.int64)
 
     def memberships(self, xyz):
-        """All (point, tile) pairs of tile + halo membership.
+        """All (point, tile) pairs of tile + halo membership of the finite points ``xyz``.
 
         Returns
         -------
@@ -92,7 +108,6 @@ class TileGrid:
         lo = np.floor((xyz[:, :2] - self.halo - o) / self.tile_size).astype(np.int64)
         hi = np.floor((xyz[:, :2] + self.halo - o) / self.tile_size).astype(np.int64)
         own = self.own_keys(xyz)
-        # own tile always inside [lo, hi]; rounding cannot move it out, but make it explicit
         lo = np.minimum(lo, own)
         hi = np.maximum(hi, own)
         span = int((hi - lo).max(initial=0)) + 1
@@ -107,6 +122,11 @@ class TileGrid:
         keys = np.concatenate(keys)
         return point, keys, (keys == own[point]).all(axis=1)
 
+    def tile_square(self, name):
+        """Lower x, y corner (2,) of the tile called ``name`` ("t_IX_IY")."""
+        key = np.array(name.split("_")[1:], dtype=np.int64)
+        return np.asarray(self.origin, dtype=np.float64) + key * self.tile_size
+
 
 @dataclass
 class TiledReport:
@@ -116,8 +136,13 @@ class TiledReport:
     ----------
     n_points : int; n_tiles : int; radius, tile_size, halo : float, model units
     computed, skipped : lists of tile names (``"t_IX_IY"``) computed now / found finished
-    tile_stats : dict tile name -> {"n_own", "n_total", "seconds", "peak_traced_bytes",
-        "maxrss_bytes"}; seconds : wall time of the whole run; out_path : str or None
+    tile_stats : dict tile name -> {"n_own", "n_total": points owned / in tile + halo,
+        "seconds": curvature task time, "peak_rss_bytes": peak resident memory of the worker
+        process during the task, "peak_traced_bytes" (with ``measure_memory``): peak of the
+        Python/numpy allocations of the task, and with ``orientation="mst"`` the same for the
+        normal pass prefixed ``normals_``}
+    flips : dict tile name -> +1/-1 applied to the tile's MST normals (``orientation="mst"``)
+    seconds : wall time of the whole run; out_path : str or None
     """
 
     n_points: int
@@ -128,11 +153,12 @@ class TiledReport:
     computed: list = field(default_factory=list)
     skipped: list = field(default_factory=list)
     tile_stats: dict = field(default_factory=dict)
+    flips: dict = field(default_factory=dict)
     seconds: float = 0.0
     out_path: str = None
 
 
-# ----------------------------------------------------------------------------- small file helpers
+# ----------------------------------------------------------------------------- small helpers
 
 def _tile_name(key):
     return f"t_{int(key[0])}_{int(key[1])}"
@@ -167,10 +193,64 @@ def _prepare_work(work, manifest):
             same = False
         if not same:
             shutil.rmtree(work)
-    for sub in ("pieces", "results", "chunks"):
+    for sub in ("pieces", "normals", "results", "chunks"):
         os.makedirs(os.path.join(work, sub), exist_ok=True)
     if not os.path.exists(mpath):
         _atomic_json(mpath, manifest)
+
+
+class _TaskMemory:
+    """Peak memory of the task running in this process (one task per worker process).
+
+    ``peak_rss_bytes``: the kernel's high-water mark of resident memory (Linux ``VmHWM``, reset at
+    the start through ``/proc/self/clear_refs``), which counts numba and library allocations too;
+    elsewhere the process's lifetime peak. ``peak_traced_bytes``: peak of the allocations that
+    Python and numpy report to ``tracemalloc`` (only when ``trace``).
+    """
+
+    def __init__(self, trace=False):
+        self.trace = trace
+
+    def __enter__(self):
+        import tracemalloc
+
+        try:
+            with open("/proc/self/clear_refs", "w") as fh:
+                fh.write("5")
+        except OSError:
+            pass
+        if self.trace:
+            tracemalloc.start()
+        return self
+
+    def stats(self):
+        import resource
+        import tracemalloc
+
+        out = {}
+        try:
+            with open("/proc/self/status") as fh:
+                hwm = [ln for ln in fh if ln.startswith("VmHWM:")]
+            out["peak_rss_bytes"] = int(hwm[0].split()[1]) * 1024
+        except (OSError, IndexError, ValueError):
+            out["peak_rss_bytes"] = int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) * 1024
+        if self.trace and tracemalloc.is_tracing():
+            out["peak_traced_bytes"] = int(tracemalloc.get_traced_memory()[1])
+        return out
+
+    def __exit__(self, *exc):
+        import tracemalloc
+
+        if self.trace and tracemalloc.is_tracing():
+            tracemalloc.stop()
+        return False
+
+
+def _set_threads(threads):
+    if threads:
+        import numba
+
+        numba.set_num_threads(min(int(threads), numba.config.NUMBA_NUM_THREADS))
 
 
 # ----------------------------------------------------------------------------- stage 1: scatter
@@ -178,6 +258,7 @@ def _prepare_work(work, manifest):
 def _scatter(xyz, normals, first, chunk_id, grid, work):
     """Write this chunk's points into the pieces of every tile whose tile + halo holds them.
 
+    xyz : (k, 3) float64 points ``first .. first + k - 1``; normals : (k, 3) float64 or None.
     Returns ``{tile name: [n_own, n_total]}`` (also stored as ``chunks/cNNNNNN.json``).
     """
     finite = np.flatnonzero(np.isfinite(xyz).all(axis=1))  # non-finite points: no tile, NaN out
@@ -189,7 +270,7 @@ def _scatter(xyz, normals, first, chunk_id, grid, work):
     starts = np.flatnonzero(np.r_[True, (np.diff(keys, axis=0) != 0).any(axis=1)])
     ends = np.r_[starts[1:], len(point)]
     summary = {}
-    for a, b in zip(starts, ends):
+    for a, b in (zip(starts, ends) if len(point) else ()):
         name = _tile_name(keys[a])
         folder = os.path.join(work, "pieces", name)
         os.makedirs(folder, exist_ok=True)
@@ -216,19 +297,48 @@ def _scatter_file_task(in_path, first, stop, chunk_id, grid, work):
                         f"({type(e).__name__}: {e})") from e
 
 
-# ----------------------------------------------------------------------------- stage 2: tiles
+def _load_tile(work, name, chunk_ids):
+    """A tile + halo from its pieces, in input order.
+
+    Returns
+    -------
+    idx : (m,) int64 global point index; xyz : (m, 3) float64; own : (m,) bool;
+    normals : (m, 3) float64 or None (given in the input); chunk_of : (m,) int64 input chunk
+    """
+    folder = os.path.join(work, "pieces", name)
+    parts = []
+    for c in chunk_ids:
+        with np.load(os.path.join(folder, f"c{c:06d}.npz")) as z:
+            parts.append({k: z[k] for k in z.files})
+    idx = np.concatenate([p["idx"] for p in parts])
+    xyz = np.concatenate([p["xyz"] for p in parts])
+    own = np.concatenate([p["own"] for p in parts])
+    normals = np.concatenate([p["normals"] for p in parts]) if "normals" in parts[0] else None
+    chunk_of = np.repeat(np.asarray(chunk_ids, dtype=np.int64), [len(p["idx"]) for p in parts])
+    return idx, xyz, own, normals, chunk_of
+
+
+# ----------------------------------------------------------------------------- stage 2: normals
 
 def _tile_normals(xyz, radius):
-    """PCA normals at every point of tile + halo, oriented by MST propagation within it."""
+    """(m, 3) PCA normals at every point of tile + halo, oriented by MST propagation within it.
+
+    The own points' normals equal the unoriented normals of a whole-cloud run up to sign (their
+    balls lie inside tile + halo); the halo's outer points see a cut ball, which only matters for
+    the propagation and the vote between tiles.
+    """
     from scipy.spatial import cKDTree
 
-    from .neighborhoods import ball_neighbors
+    from .neighborhoods import ball_grid, ball_neighbors
     from .normals import orient_mst, pca_normals
 
     nv = np.full(xyz.shape, np.nan)
     finite = np.flatnonzero(np.isfinite(xyz).all(axis=1))
     if len(finite):
-        tree = cKDTree(xyz[finite])
+        # the search the estimator itself uses, so the neighbour lists are the same
+        tree = ball_grid(xyz, radius)
+        if tree is None:
+            tree = cKDTree(xyz[finite])
         for s in range(0, len(xyz), 65536):
             idx = np.arange(s, min(s + 65536, len(xyz)))
             indptr, indices = ball_neighbors(tree, finite, xyz[idx], radius)
@@ -236,124 +346,73 @@ def _tile_normals(xyz, radius):
     return orient_mst(xyz, nv)
 
 
-def _estimate_tile(xyz, own, normals, radius, orientation, options):
-    """Curvature at the own points of one tile + halo; returns (CurvatureResult, halo normals)."""
-    from .estimator import principal_curvatures
+def _normals_task(name, work, chunk_ids, radius, grid, in_path, threads=None,
+                  measure_memory=False):
+    """Dask task: MST-oriented normals of one tile; writes ``normals/<tile>.npz`` and ``.json``.
 
-    query = np.flatnonzero(own)
-    halo_normals = None
-    if normals is None and isinstance(orientation, str):
-        normals = _tile_normals(xyz, radius)
-        halo_normals = normals[~own]
-    if normals is not None:
-        res = principal_curvatures(xyz, normals=normals, radius=radius, query=query, **options)
-    else:
-        res = principal_curvatures(xyz, radius=radius, orientation=orientation, query=query,
-                                   normal_estimation="pca", **options)
-    return res, halo_normals
-
-
-def _tile_task(name, work, chunk_ids, radius, orientation, options, grid, in_path,
-               threads=None, measure_memory=False):
-    """Dask task: estimate one tile from its pieces; writes results per chunk and ``done.json``."""
-    import resource
-    import tracemalloc
-
+    The npz holds ``own_normals`` (n_own, 3) in tile order and the overlap data for the vote
+    between tiles: ``band_idx, band_normals`` (own points within the halo width of the tile's
+    border) and ``halo_idx, halo_normals, halo_owner`` (the halo points, their tile).
+    """
     t0 = time.perf_counter()
     try:
-        if threads:
-            import numba
-
-            numba.set_num_threads(int(threads))
-        if measure_memory:
-            tracemalloc.start()
-        folder = os.path.join(work, "pieces", name)
-        parts = []
-        for c in chunk_ids:
-            with np.load(os.path.join(folder, f"c{c:06d}.npz")) as z:
-                parts.append({k: z[k] for k in z.files})
-        idx = np.concatenate([p["idx"] for p in parts])
-        xyz = np.concatenate([p["xyz"] for p in parts])
-        own = np.concatenate([p["own"] for p in parts])
-        normals = np.concatenate([p["normals"] for p in parts]) if "normals" in parts[0] else None
-        chunk_of = np.concatenate([np.full(len(p["idx"]), c) for c, p in zip(chunk_ids, parts)])
-        del parts
-        res, halo_normals = _estimate_tile(xyz, own, normals, radius, orientation, options)
-        out = os.path.join(work, "results", name)
-        os.makedirs(out, exist_ok=True)
-        own_idx, own_chunk = idx[own], chunk_of[own]
-        for c in np.unique(own_chunk):
-            sel = own_chunk == c
-            _atomic_savez(os.path.join(out, f"c{int(c):06d}.npz"), idx=own_idx[sel],
-                          **{k: getattr(res, k)[sel] for k in _row_fields()})
-        stats = {"n_own": int(own.sum()), "n_total": int(len(own))}
-        if halo_normals is not None:
-            # overlap data for the cross-tile vote: own points near the border, halo normals
-            ox, oy = grid.origin
-            key = np.array(name.split("_")[1:], dtype=np.int64)
-            lo = np.array([ox, oy]) + key * grid.tile_size
-            rel = xyz[:, :2] - lo
+        _set_threads(threads)
+        with _TaskMemory(measure_memory) as mem:
+            idx, xyz, own, _, _ = _load_tile(work, name, chunk_ids)
+            nv = _tile_normals(xyz, radius)
+            rel = xyz[:, :2] - grid.tile_square(name)
             border = own & ((rel < grid.halo) | (rel > grid.tile_size - grid.halo)).any(axis=1)
-            _atomic_savez(os.path.join(out, "overlap.npz"), band_idx=idx[border],
-                          band_normals=res.normals[np.flatnonzero(border[own])],
-                          halo_idx=idx[~own], halo_normals=halo_normals,
-                          halo_owner=grid.own_keys(xyz[~own]))
-            # partial sums for the outward decision: sum p.n, sum n, sum p, count
-            ok = np.isfinite(res.normals).all(axis=1)
-            p, n = xyz[own][ok], res.normals[ok]
-            stats["orient"] = [float(np.einsum("ij,ij->", p, n)), *n.sum(axis=0).tolist(),
-                               *p.sum(axis=0).tolist(), int(ok.sum())]
-        if measure_memory:
-            stats["peak_traced_bytes"] = int(tracemalloc.get_traced_memory()[1])
-            tracemalloc.stop()
-        stats["maxrss_bytes"] = int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) * 1024
+            _atomic_savez(os.path.join(work, "normals", f"{name}.npz"), own_normals=nv[own],
+                          band_idx=idx[border], band_normals=nv[border], halo_idx=idx[~own],
+                          halo_normals=nv[~own], halo_owner=grid.own_keys(xyz[~own]))
+            # partial sums for the outward decision of a group of tiles: sum p.n, sum n, sum p, count
+            ok = own & np.isfinite(nv).all(axis=1)
+            p, n = xyz[ok], nv[ok]
+            stats = {"orient": [float(np.einsum("ij,ij->", p, n)), *n.sum(axis=0).tolist(),
+                                *p.sum(axis=0).tolist(), int(ok.sum())]}
+            stats.update(mem.stats())
         stats["seconds"] = time.perf_counter() - t0
-        _atomic_json(os.path.join(out, "done.json"), stats)
+        _atomic_json(os.path.join(work, "normals", f"{name}.json"), stats)
         return stats
     except Exception as e:
-        if measure_memory and tracemalloc.is_tracing():
-            tracemalloc.stop()
-        raise TileError(f"tile {name} of {in_path} failed: {type(e).__name__}: {e}") from e
+        raise TileError(f"tile {name} of {in_path}: normal estimation failed: "
+                        f"{type(e).__name__}: {e}") from e
 
 
-# ----------------------------------------------------------------------------- stage 3: orientation
+def _tile_flips(work, names):
+    """+1/-1 per tile so that tiles agree in their overlaps and each group points outward.
 
-def _tile_flips(work, names, grid):
-    """+1/-1 per tile so that tiles agree in their overlaps and each group points outward."""
+    Reads the overlap data of one tile and its neighbours' border bands at a time, so the
+    driver's memory is bounded by a few tiles' borders.
+    """
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import breadth_first_order, connected_components, minimum_spanning_tree
 
     pos = {n: i for i, n in enumerate(names)}
-    bands = {}
 
-    def band(name):
-        if name not in bands:
-            with np.load(os.path.join(work, "results", name, "overlap.npz")) as z:
-                bands[name] = (z["band_idx"], z["band_normals"])
-        return bands[name]
+    def npz(name, *keys):
+        with np.load(os.path.join(work, "normals", f"{name}.npz")) as z:
+            return [z[k] for k in keys]
 
     rows, cols, votes = [], [], []
     for a in names:
-        with np.load(os.path.join(work, "results", a, "overlap.npz")) as z:
-            h_idx, h_nv, owner = z["halo_idx"], z["halo_normals"], z["halo_owner"]
+        h_idx, h_nv, owner = npz(a, "halo_idx", "halo_normals", "halo_owner")
         for key in np.unique(owner, axis=0):
             b = _tile_name(key)
             if b not in pos:
                 continue
             sel = (owner == key).all(axis=1)
-            b_idx, b_nv = band(b)
+            b_idx, b_nv = npz(b, "band_idx", "band_normals")
             _, ia, ib = np.intersect1d(h_idx[sel], b_idx, assume_unique=True, return_indices=True)
-            dots = np.einsum("ij,ij->i", h_nv[sel][ia], b_nv[ib])
-            vote = float(np.nansum(dots))
+            vote = float(np.nansum(np.einsum("ij,ij->i", h_nv[sel][ia], b_nv[ib])))
             if vote != 0.0:
                 rows.append(pos[a])
                 cols.append(pos[b])
                 votes.append(vote)
     n = len(names)
-    votes = np.asarray(votes)
-    # symmetric vote matrix; the spanning tree keeps the strongest agreements (smallest 1/|vote|)
-    vote_m = coo_matrix((votes, (rows, cols)), shape=(n, n)).tocsr()
+    vote_m = coo_matrix((np.asarray(votes, dtype=np.float64), (rows, cols)), shape=(n, n)).tocsr()
     vote_m = vote_m + vote_m.T
+    # the spanning tree keeps the strongest agreements or disagreements (smallest 1 / |vote|)
     strength = vote_m.copy()
     strength.data = 1.0 / (np.abs(strength.data) + 1e-12)
     tree = minimum_spanning_tree(strength)
@@ -370,8 +429,8 @@ def _tile_flips(work, names, grid):
                 flips[i] = flips[pred[i]] * np.sign(vote_m[i, pred[i]])
             done[i] = True
     # outward decision per group of tiles: sum over points of (p - centroid) . n
-    st = np.array([_read_json(os.path.join(work, "results", nm, "done.json"))["orient"]
-                   for nm in names]).reshape(n, 8)
+    st = np.array([_read_json(os.path.join(work, "normals", f"{nm}.json"))["orient"]
+                   for nm in names], dtype=np.float64).reshape(n, 8)
     for c in range(n_comp):
         g = labels == c
         cnt = st[g, 7].sum()
@@ -381,55 +440,96 @@ def _tile_flips(work, names, grid):
         score = np.sum(flips[g] * (st[g, 0] - st[g, 1:4] @ centroid))
         if score < 0:
             flips[g] *= -1.0
-    return dict(zip(names, flips))
+    return {nm: int(f) for nm, f in zip(names, flips)}
+
+
+# ----------------------------------------------------------------------------- stage 3: curvature
+
+def _estimate_tile(xyz, own, normals, radius, orientation, options):
+    """CurvatureResult at the own points of one tile + halo (rows in tile order)."""
+    from .estimator import principal_curvatures
+
+    query = np.flatnonzero(own)
+    if normals is not None:
+        return principal_curvatures(xyz, normals=normals, radius=radius, query=query, **options)
+    return principal_curvatures(xyz, radius=radius, orientation=orientation, query=query,
+                                **options)
+
+
+def _result_rows(res):
+    """The per-row arrays of a CurvatureResult, ``{name: (m, ...) array}``."""
+    m = len(res)
+    return {k: v for k, v in vars(res).items() if isinstance(v, np.ndarray) and len(v) == m}
+
+
+def _curvature_task(name, work, chunk_ids, radius, orientation, options, in_path, flip=None,
+                    threads=None, measure_memory=False):
+    """Dask task: estimate one tile; writes results per input chunk and ``done.json``.
+
+    With ``flip`` (``orientation="mst"``) the tile's stored MST normals times ``flip`` are used.
+    """
+    t0 = time.perf_counter()
+    try:
+        _set_threads(threads)
+        with _TaskMemory(measure_memory) as mem:
+            idx, xyz, own, normals, chunk_of = _load_tile(work, name, chunk_ids)
+            if flip is not None:
+                with np.load(os.path.join(work, "normals", f"{name}.npz")) as z:
+                    normals = np.full(xyz.shape, np.nan)
+                    normals[own] = z["own_normals"] * float(flip)
+            res = _estimate_tile(xyz, own, normals, radius, orientation, options)
+            rows = _result_rows(res)
+            out = os.path.join(work, "results", name)
+            os.makedirs(out, exist_ok=True)
+            own_idx, own_chunk = idx[own], chunk_of[own]
+            for c in np.unique(own_chunk):
+                sel = own_chunk == c
+                _atomic_savez(os.path.join(out, f"c{int(c):06d}.npz"), idx=own_idx[sel],
+                              **{k: v[sel] for k, v in rows.items()})
+            stats = {"n_own": int(own.sum()), "n_total": int(len(own))}
+            stats.update(mem.stats())
+        stats["seconds"] = time.perf_counter() - t0
+        _atomic_json(os.path.join(out, "done.json"), stats)
+        return stats
+    except Exception as e:
+        raise TileError(f"tile {name} of {in_path} failed: {type(e).__name__}: {e}") from e
 
 
 # ----------------------------------------------------------------------------- stage 4: assembly
 
-def _row_fields():
-    """Names of the per-row array fields of CurvatureResult (all but ``valid`` and ``radius``)."""
-    from .estimator import CurvatureResult
-
-    return [f.name for f in dataclasses.fields(CurvatureResult) if f.name not in ("valid", "radius")]
-
-
-def _empty_rows(name, count):
-    if name in ("d1", "d2", "normals"):
-        return np.full((count, 3), np.nan)
-    if name in ("n_neighbors", "n_samples"):
-        return np.zeros(count, dtype=np.int64)
-    return np.full(count, np.nan)
-
-
-def _gather(work, tiles, chunk_id, first, count, flips):
+def _gather(work, tiles, chunk_id, first, count):
     """Result arrays of points ``first .. first + count - 1`` from the tiles that own them; points
-    no tile owns (non-finite coordinates) keep NaN / 0."""
-    out = {k: _empty_rows(k, count) for k in _row_fields()}
+    no tile owns (non-finite coordinates) keep NaN / 0 / False."""
+    out = {}
     for name in tiles:
         with np.load(os.path.join(work, "results", name, f"c{chunk_id:06d}.npz")) as z:
             r = {k: z[k] for k in z.files}
         rows = r.pop("idx") - first
-        if flips.get(name, 1.0) < 0:
-            # the same fits seen from the other side: kappa -> -kappa swaps the roles of k1, k2
-            r["k1"], r["k2"] = -r["k2"], -r["k1"]
-            r["d1"], r["d2"] = r["d2"], r["d1"]
-            r["normals"] = -r["normals"]
         for k, a in r.items():
+            if k not in out:
+                fill = np.nan if a.dtype.kind == "f" else 0
+                out[k] = np.full((count,) + a.shape[1:], fill, dtype=a.dtype)
             out[k][rows] = a
+    if not out:  # a chunk of non-finite points only
+        out = {k: np.full(count, np.nan) for k in ("k1", "k2", "residual", "noise")}
+        out.update({k: np.full((count, 3), np.nan) for k in ("d1", "d2", "normals")})
+        out.update(n_neighbors=np.zeros(count, np.int64), n_samples=np.zeros(count, np.int64),
+                   valid=np.zeros(count, bool))
     return out
 
 
 def _as_result(arrays, radius):
     from .estimator import CurvatureResult
 
-    return CurvatureResult(valid=np.isfinite(arrays["k1"]), radius=float(radius), **arrays)
+    return CurvatureResult(radius=float(radius), **arrays)
 
 
 # ----------------------------------------------------------------------------- the driver
 
 @contextlib.contextmanager
 def _dask_client(scheduler, n_workers):
-    """A distributed Client: the given one, one connected to an address, or a LocalCluster."""
+    """(client, numba threads per task): the given Client, one connected to an address, or a
+    LocalCluster of ``n_workers`` one-thread processes, closed on exit."""
     from distributed import Client, LocalCluster
 
     if scheduler is not None and not isinstance(scheduler, str):
@@ -445,18 +545,20 @@ def _dask_client(scheduler, n_workers):
         yield client, max(1, (os.cpu_count() or 1) // n_workers)
 
 
-def _run(client, submit, jobs, desc, progress):
-    """Submit ``jobs`` ({name: args}) and wait; the first failure cancels the rest and is raised
-    naming its tile or chunk."""
+def _run(client, jobs, desc, unit, in_path, progress):
+    """Submit ``jobs`` ({name: (func, args, kwargs)}) and wait for all.
+
+    The first failure cancels the rest and is raised naming its tile or chunk and the file.
+    Returns {name: task result}.
+    """
     from distributed import as_completed
 
-    futures = {}
-    for name, (func, args, kwargs) in jobs.items():
-        futures[client.submit(func, *args, key=f"meshcurv-{name}-{submit}", pure=False,
-                              retries=0, **kwargs)] = name
+    token = f"{os.getpid()}-{time.time_ns()}"
+    futures = {client.submit(func, *args, key=f"meshcurv-{desc}-{name}-{token}", pure=False,
+                             **kwargs): name
+               for name, (func, args, kwargs) in jobs.items()}
     results = {}
-    bar = tqdm(total=len(futures), desc=desc, unit="tile" if desc == "tiles" else "chunk",
-               disable=not progress)
+    bar = tqdm(total=len(futures), desc=desc, unit=unit, disable=not progress)
     try:
         for fut in as_completed(futures):
             name = futures[fut]
@@ -465,7 +567,8 @@ def _run(client, submit, jobs, desc, progress):
             except (TileError, las.LasReadError):
                 raise
             except Exception as e:  # KilledWorker, CommClosedError, ...: the worker is gone
-                raise TileError(f"{desc[:-1]} {name}: {type(e).__name__}: {e}") from e
+                raise TileError(f"{unit} {name} of {in_path}: {desc} task lost "
+                                f"({type(e).__name__}: {e})") from e
             bar.update(1)
     except BaseException:
         client.cancel(list(futures))
@@ -493,23 +596,58 @@ def _check_orientation(orientation):
     return tuple(float(c) for c in vp)
 
 
+def _check_options(options):
+    """Reject estimator options the tiled run cannot take, before any work starts."""
+    from .estimator import principal_curvatures
+
+    reserved = sorted(set(options) & set(_RESERVED))
+    if reserved:
+        raise ValueError(f"the tiled run sets {reserved} itself; pass them as its own arguments")
+    if options.get("neighborhood", "ball") not in ("auto", "ball"):
+        raise ValueError("tiled runs are for point clouds: neighborhood must be 'ball'")
+    if options.get("normal_estimation", "pca") not in ("auto", "pca"):
+        raise ValueError("tiled runs are for point clouds: normal_estimation must be 'pca'")
+    # a 3 x 3 grid: wrong names or values raise here, not on every worker
+    g = np.stack(np.meshgrid(np.arange(3.0), np.arange(3.0), indexing="ij"), -1).reshape(-1, 2)
+    try:
+        principal_curvatures(np.column_stack([g, np.zeros(9)]), radius=1.5,
+                             orientation=(1.0, 1.0, 10.0), query=[4], **options)
+    except TypeError as e:
+        raise ValueError(f"unknown estimator option: {e}") from e
+
+
 def _process(client, threads, work, grid, radius, orientation, options, chunk_jobs, in_path,
-             progress, measure_memory, report):
-    """Stages 1-3 on a connected client: scatter, tiles, flips. Returns (chunk summaries, flips)."""
-    token = f"{os.getpid()}-{time.time_ns()}"
+             progress, measure_memory, report, has_normals):
+    """Stages 1-3 on a connected client. Returns {chunk id: [tiles owning points of it]}."""
     summaries = {int(f[1:7]): _read_json(os.path.join(work, "chunks", f))
                  for f in os.listdir(os.path.join(work, "chunks")) if f.endswith(".json")}
     todo = {f"c{cid:06d}": job for cid, job in chunk_jobs.items() if cid not in summaries}
     if todo:
-        done = _run(client, token, todo, "chunks", progress)
+        done = _run(client, todo, "scatter", "chunk", in_path, progress)
         summaries.update({int(k[1:]): v for k, v in done.items()})
     tiles = {}
     for cid in sorted(summaries):
-        for name, (n_own, _) in summaries[cid].items():
+        for name in summaries[cid]:
             tiles.setdefault(name, []).append(cid)
-    names = sorted(n for n, cids in tiles.items()
-                   if any(summaries[c][n][0] for c in cids))  # tiles that own points
+    names = sorted(n for n, cids in tiles.items() if any(summaries[c][n][0] for c in cids))
     report.n_tiles = len(names)
+    task_kw = {"threads": threads, "measure_memory": measure_memory}
+
+    flips = {}
+    if isinstance(orientation, str) and not has_normals:
+        normal_stats = {}
+        jobs = {}
+        for name in names:
+            marker = os.path.join(work, "normals", f"{name}.json")
+            if os.path.exists(marker):
+                normal_stats[name] = _read_json(marker)
+            else:
+                jobs[name] = (_normals_task, (name, work, tiles[name], radius, grid, in_path),
+                              task_kw)
+        normal_stats.update(_run(client, jobs, "normals", "tile", in_path, progress))
+        flips = _tile_flips(work, names)
+        report.flips = flips
+
     jobs = {}
     for name in names:
         marker = os.path.join(work, "results", name, "done.json")
@@ -517,19 +655,19 @@ def _process(client, threads, work, grid, radius, orientation, options, chunk_jo
             report.skipped.append(name)
             report.tile_stats[name] = _read_json(marker)
         else:
-            jobs[name] = (_tile_task, (name, work, tiles[name], radius, orientation, options,
-                                       grid, in_path), {"threads": threads,
-                                                        "measure_memory": measure_memory})
+            jobs[name] = (_curvature_task, (name, work, tiles[name], radius, orientation, options,
+                                            in_path), dict(task_kw, flip=flips.get(name)))
     report.computed = sorted(jobs)
-    report.tile_stats.update(_run(client, token, jobs, "tiles", progress))
-    flips = {}
-    if isinstance(orientation, str) and "orient" in next(iter(report.tile_stats.values()), {}):
-        flips = _tile_flips(work, names, grid)
-    own_tiles = {cid: [n for n, (n_own, _) in s.items() if n_own] for cid, s in summaries.items()}
-    return own_tiles, flips
+    report.tile_stats.update(_run(client, jobs, "tiles", "tile", in_path, progress))
+    if flips:
+        for name in names:
+            report.tile_stats[name].update(
+                {f"normals_{k}": v for k, v in normal_stats[name].items() if k != "orient"})
+    return {cid: [n for n, (n_own, _) in s.items() if n_own] for cid, s in summaries.items()}
 
 
 def _default_tile_size(n_points, extent, target=1_000_000):
+    """Side (model units) of square tiles holding about ``target`` points of a uniform cloud."""
     area = max(float(extent[0]) * float(extent[1]), 1e-300)
     return float(np.sqrt(area * target / max(n_points, 1)))
 
@@ -537,13 +675,14 @@ def _default_tile_size(n_points, extent, target=1_000_000):
 def annotate_tiled(in_path, out_path, radius=None, tile_size=None, *, orientation="mst",
                    scheduler=None, n_workers=None, chunk_size=500_000, work_dir=None,
                    keep_work=False, progress=True, float_type="f8", measure_memory=False,
-                   **options):
+                   return_result=False, **options):
     """Annotate a LAS/LAZ file with curvature fields, tile by tile on Dask; output in input order.
 
     Parameters
     ----------
     in_path, out_path : str, .las or .laz (``out_path`` must differ from ``in_path``; .laz is
-        compressed with lazrs). Both must be visible to every worker (a shared file system).
+        compressed with lazrs). Both, and ``work_dir``, must be visible to every worker (on
+        several machines: a shared file system).
     radius : float, model units. Default: :func:`meshcurv.default_radius` of the first chunk.
     tile_size : float, model units, side of the square x, y tiles. Default: about 10^6 points
         per tile from the header's extent.
@@ -551,19 +690,22 @@ def annotate_tiled(in_path, out_path, radius=None, tile_size=None, *, orientatio
         Used when the file has no normals. A viewpoint (scanner position) reproduces the untiled
         run exactly; "mst" orients per tile and makes tiles agree (see the module docstring).
     scheduler : None, str or distributed.Client
-        None starts a LocalCluster (``n_workers`` processes, one thread each); a string is the
-        address of an existing scheduler ("tcp://host:8786").
+        None starts a LocalCluster (``n_workers`` processes, one thread each) and closes it at
+        the end; a string is the address of an existing scheduler ("tcp://host:8786").
+    n_workers : int, workers of the LocalCluster (default: the number of cores, at most 8)
     chunk_size : int, points per read/scatter/write chunk (bounds the driver's memory)
     work_dir : str, default ``out_path + ".meshcurv-work"``; keeps finished tiles for a rerun
     keep_work : bool, keep the work folder after success
     progress : bool, progress bars over chunks and tiles
     float_type : "f8" or "f4", type of the written float fields
-    measure_memory : bool, trace each tile task's peak Python/numpy memory (tracemalloc)
+    measure_memory : bool, also trace each tile task's peak Python/numpy allocations
+    return_result : bool, also return the CurvatureResult (one row per point; needs memory for
+        the whole cloud, meant for checks on small files)
     **options : passed to :func:`meshcurv.principal_curvatures` (n_directions, slab, ...)
 
     Returns
     -------
-    TiledReport
+    TiledReport (and the CurvatureResult with ``return_result``)
 
     Raises
     ------
@@ -582,15 +724,19 @@ def annotate_tiled(in_path, out_path, radius=None, tile_size=None, *, orientatio
     in_path, out_path = os.path.abspath(in_path), os.path.abspath(out_path)
     las._check_paths(in_path, out_path)
     orientation = _check_orientation(orientation)
+    _check_options(options)
+    chunk_size = int(chunk_size)
+    if chunk_size < 1:
+        raise ValueError(f"chunk_size must be a positive number of points, got {chunk_size}")
     with las._open(in_path) as reader:
         header = reader.header
         n_points = int(header.point_count)
         mins, maxs = np.asarray(header.mins, float), np.asarray(header.maxs, float)
         has_normals = las._normal_dims(header.point_format) is not None
     if radius is None:
-        first = next(las.iter_las_chunks(in_path, chunk_size, stop=chunk_size), None)
         from .neighborhoods import default_radius
 
+        first = next(las.iter_las_chunks(in_path, chunk_size, stop=chunk_size), None)
         radius = default_radius(first[1]) if first is not None else float("nan")
     radius = float(radius)
     if not (np.isfinite(radius) and radius > 0):
@@ -600,12 +746,11 @@ def annotate_tiled(in_path, out_path, radius=None, tile_size=None, *, orientatio
     tile_size = float(tile_size)
     if not (np.isfinite(tile_size) and tile_size > 0):
         raise ValueError(f"tile_size must be a positive number of model units, got {tile_size}")
-    grid = TileGrid(origin=(float(mins[0]), float(mins[1])), tile_size=tile_size,
-                    halo=radius * (1 + _HALO_MARGIN) + _HALO_MARGIN * tile_size * 1e-3)
+    grid = TileGrid.for_radius(mins[:2], tile_size, radius)
     work = os.path.abspath(work_dir or out_path + ".meshcurv-work")
     st = os.stat(in_path)
     manifest = {"input": in_path, "size": st.st_size, "mtime_ns": st.st_mtime_ns,
-                **_options_manifest(radius, grid, orientation, options, int(chunk_size))}
+                **_options_manifest(radius, grid, orientation, options, chunk_size)}
     _prepare_work(work, manifest)
     report = TiledReport(n_points=n_points, n_tiles=0, radius=radius, tile_size=tile_size,
                          halo=grid.halo, out_path=out_path)
@@ -614,27 +759,40 @@ def annotate_tiled(in_path, out_path, radius=None, tile_size=None, *, orientatio
                   for c, s in enumerate(range(0, n_points, chunk_size))}
     try:
         with _dask_client(scheduler, n_workers) as (client, threads):
-            own_tiles, flips = _process(client, threads, work, grid, radius, orientation, options,
-                                        chunk_jobs, in_path, progress, measure_memory, report)
+            own_tiles = _process(client, threads, work, grid, radius, orientation, options,
+                                 chunk_jobs, in_path, progress, measure_memory, report,
+                                 has_normals)
     except las.LasReadError:
         # an unreadable input leaves nothing worth resuming: a fixed file starts afresh anyway
         shutil.rmtree(work, ignore_errors=True)
         raise
     write_normals = not has_normals
     names = list(las.CURVATURE_FIELDS) + (list(las.NORMAL_FIELDS) if write_normals else [])
+    kept = []
 
     def fields_for(first, count):
-        arrays = _gather(work, own_tiles.get(first // chunk_size, []), first // chunk_size,
-                         first, count, flips)
-        return las.result_fields(_as_result(arrays, radius), normals=write_normals,
-                                 float_type=float_type)
+        chunk_id = first // chunk_size
+        res = _as_result(_gather(work, own_tiles.get(chunk_id, []), chunk_id, first, count),
+                         radius)
+        if return_result:
+            kept.append(res)
+        return las.result_fields(res, normals=write_normals, float_type=float_type)
 
     las.annotate_las(in_path, out_path, fields_for, names, chunk_size=chunk_size,
                      float_type=float_type)
     if not keep_work:
         shutil.rmtree(work, ignore_errors=True)
     report.seconds = time.perf_counter() - t0
-    return report
+    if not return_result:
+        return report
+    return report, _concat_results(kept, radius)
+
+
+def _concat_results(parts, radius):
+    rows = [_result_rows(p) for p in parts]
+    if not rows:
+        return _as_result(_gather("", [], 0, 0, 0), radius)
+    return _as_result({k: np.concatenate([r[k] for r in rows]) for k in rows[0]}, radius)
 
 
 def principal_curvatures_tiled(vertices, radius, tile_size, normals=None, *, orientation="mst",
@@ -645,7 +803,8 @@ def principal_curvatures_tiled(vertices, radius, tile_size, normals=None, *, ori
 
     The driver cuts the cloud into tile + halo pieces in a work folder (which workers must see);
     each task loads one tile + halo only. With given normals or a viewpoint ``orientation`` the
-    result equals ``principal_curvatures(vertices, normals=..., radius=radius, orientation=...)``.
+    result equals ``principal_curvatures(vertices, normals=..., radius=radius, orientation=...)``
+    bit for bit.
 
     Parameters
     ----------
@@ -675,30 +834,29 @@ def principal_curvatures_tiled(vertices, radius, tile_size, normals=None, *, ori
         if nv.shape != v.shape:
             raise ValueError(f"normals must have the shape of vertices {v.shape}, got {nv.shape}")
     orientation = _check_orientation(orientation)
-    radius, tile_size = float(radius), float(tile_size)
+    _check_options(options)
+    radius, tile_size, chunk_size = float(radius), float(tile_size), int(chunk_size)
     if not (np.isfinite(radius) and radius > 0 and np.isfinite(tile_size) and tile_size > 0):
         raise ValueError("radius and tile_size must be positive numbers of model units")
     finite = np.isfinite(v).all(axis=1)
     origin = v[finite, :2].min(axis=0) if finite.any() else np.zeros(2)
-    grid = TileGrid(origin=(float(origin[0]), float(origin[1])), tile_size=tile_size,
-                    halo=radius * (1 + _HALO_MARGIN) + _HALO_MARGIN * tile_size * 1e-3)
+    grid = TileGrid.for_radius(origin, tile_size, radius)
     n = len(v)
     report = TiledReport(n_points=n, n_tiles=0, radius=radius, tile_size=tile_size, halo=grid.halo)
     with contextlib.ExitStack() as stack:
         work = work_dir or stack.enter_context(tempfile.TemporaryDirectory(prefix="meshcurv-"))
+        # an array cannot be recognised again: always start afresh
         _prepare_work(work, {"input": "memory", "n": n, "token": time.time_ns(),
-                             **_options_manifest(radius, grid, orientation, options,
-                                                 int(chunk_size))})
+                             **_options_manifest(radius, grid, orientation, options, chunk_size)})
         for c, s in enumerate(range(0, n, chunk_size)):
             _scatter(v[s:s + chunk_size], None if nv is None else nv[s:s + chunk_size], s, c,
                      grid, work)
         with _dask_client(scheduler, n_workers) as (client, threads):
-            own_tiles, flips = _process(client, threads, work, grid, radius, orientation,
-                                        options, {}, "<array>", progress, measure_memory, report)
-        parts = [_gather(work, own_tiles.get(c, []), c, s, min(chunk_size, n - s), flips)
+            own_tiles = _process(client, threads, work, grid, radius, orientation, options, {},
+                                 "<array>", progress, measure_memory, report, nv is not None)
+        parts = [_as_result(_gather(work, own_tiles.get(c, []), c, s, min(chunk_size, n - s)),
+                            radius)
                  for c, s in enumerate(range(0, n, chunk_size))]
-    arrays = {k: np.concatenate([p[k] for p in parts]) if parts else _empty_rows(k, 0)
-              for k in _row_fields()}
-    res = _as_result(arrays, radius)
+    res = _concat_results(parts, radius)
     report.seconds = time.perf_counter() - t0
     return (res, report) if return_report else res

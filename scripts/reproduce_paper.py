@@ -1,0 +1,438 @@
+"""Reproduce the evaluation of Seibert et al. (CGA circle fits for principal curvatures).
+
+- **Table 2**: the paraboloid z = 0.2 x^2 + 0.1 y^2 on [-10, 10]^2, radius 2, 8 directions,
+  regular and random sampling, |dk1| and |dk2| statistics next to the paper's numbers.
+- **Figs. 8 and 9**: the circle fit alone on 12 (4, 24) points of circular arcs seen through a
+  fixed window of width 4, radii 1 .. 10000, Gaussian noise sigma = 0.5, regular and random
+  spacing along the arc.
+- **Fig. 10**: RMS error of the sine (Euler model) fit for 4 .. 100 samples and several noise
+  levels.
+
+Usage::
+
+    python scripts/reproduce_paper.py            # -> docs/paper_reproduction.md, docs/paper_*.png
+    python scripts/reproduce_paper.py --quick    # fewer trials, coarser grids (about a minute)
+
+What the paper leaves open and how it is set here (also stated in the report):
+
+- Table 2 gives "points 13926" for a regular grid with "dx 0.11" on [-10, 10]^2; a 0.11 grid
+  has 182^2 = 33124 points, while 13926 is a 118 x 118 grid (spacing 0.171). Both are run.
+  Errors are taken over the vertices at least one radius (2) from the border (the paper does not
+  say which vertices it counted); the statistics over all vertices are listed as well.
+- Circle fits: the arc passes through the estimation point x (noise-free, with its exact normal,
+  as in the estimator where x is the vertex itself); the 12 arc points get isotropic Gaussian
+  noise sigma in the plane. The window is 4 wide (the arc spans |u| <= 2, or the lower half
+  circle when the radius is below 2). The estimated radius is 1 / kappa; the plots show the
+  median and the quartiles over the trials.
+"""
+
+import argparse
+import os
+import sys
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+
+# Table 2 of the paper: (statistic, regular, random).
+PAPER_TABLE2 = {
+    "points": (13926, 14049),
+    "dk1 min": (0.000, 0.000), "dk1 max": (0.028, 0.030),
+    "dk1 mean": (0.008, 0.008), "dk1 std": (0.006, 0.006),
+    "dk2 min": (0.000, 0.000), "dk2 max": (0.085, 0.090),
+    "dk2 mean": (0.019, 0.018), "dk2 std": (0.018, 0.018),
+}
+
+# meshcurv configurations run on Table 2's surface.
+TABLE2_SETTINGS = {
+    "paper (unit circle norm., no blend, no robust, no weights)":
+        dict(circle_normalization="unit", section_blend=False, robust=False, weighting="none"),
+    "meshcurv defaults": dict(),
+    "meshcurv, weighting none": dict(weighting="none"),
+}
+
+
+# ---------------------------------------------------------------------------------------------
+# Table 2
+# ---------------------------------------------------------------------------------------------
+
+def table2_surfaces(quick=False):
+    """(label, Surface) of Table 2: regular grids (0.171 and 0.11 spacing) and random points."""
+    from meshcurv import surfaces
+
+    out = [("regular, 118 x 118 (dx 0.171)", surfaces.paraboloid("regular", spacing=20 / 117)),
+           ("random, 14049 points", surfaces.paraboloid("random", n=14049, seed=0))]
+    if not quick:
+        out.insert(1, ("regular, dx 0.11 (182 x 182)", surfaces.paraboloid("regular",
+                                                                             spacing=20 / 182)))
+    return out
+
+
+def error_statistics(estimate, exact):
+    """min, max, mean, std of |estimate - exact| over the finite estimates, and their count."""
+    e = np.abs(estimate - exact)
+    e = e[np.isfinite(e)]
+    return dict(min=float(e.min()), max=float(e.max()), mean=float(e.mean()),
+                std=float(e.std()), n=int(e.size))
+
+
+def run_table2(quick=False, radius=2.0, n_directions=8):
+    """meshcurv on Table 2's paraboloid; list of dicts (sampling, setting, region, stats)."""
+    import meshcurv
+
+    rows = []
+    for label, surf in table2_surfaces(quick):
+        for setting, options in TABLE2_SETTINGS.items():
+            t0 = time.perf_counter()
+            res = meshcurv.principal_curvatures(surf.vertices, surf.faces, radius=radius,
+                                                n_directions=n_directions, **options)
+            seconds = time.perf_counter() - t0
+            for region, mask in (("interior", surf.border_distance >= radius),
+                                 ("all", np.ones(len(surf.vertices), dtype=bool))):
+                rows.append(dict(sampling=label, setting=setting, region=region,
+                                 points=len(surf.vertices), seconds=seconds,
+                                 failed=float(np.mean(~res.valid[mask])),
+                                 dk1=error_statistics(res.k1[mask], surf.k1[mask]),
+                                 dk2=error_statistics(res.k2[mask], surf.k2[mask])))
+    return rows
+
+
+def table2_markdown(rows):
+    """Paper's Table 2 next to ours: one row per sampling and setting, interior vertices first,
+    then all vertices (border included)."""
+    head = ("| sampling | setting | points (evaluated) | Δκ1 min | Δκ1 max | Δκ1 mean | Δκ1 std "
+            "| Δκ2 min | Δκ2 max | Δκ2 mean | Δκ2 std | no estimate | time s |")
+    out = []
+    for region in ("interior", "all"):
+        title = ("Vertices at least one radius (2) from the border" if region == "interior"
+                 else "All vertices (border included)")
+        out += [f"**{title}**", "", head, "|---" * 13 + "|"]
+        for j, sampling in enumerate(("regular", "random")):
+            p = {k: v[j] for k, v in PAPER_TABLE2.items()}
+            out.append(f"| {sampling} | **paper (published numbers)** | {p['points']} | "
+                       + " | ".join(f"{p[f'{c} {st}']:.3f}" for c in ("dk1", "dk2")
+                                    for st in ("min", "max", "mean", "std")) + " | - | - |")
+        for r in (r for r in rows if r["region"] == region):
+            out.append(f"| {r['sampling']} | {r['setting']} | {r['points']} ({r['dk1']['n']}) | "
+                       + " | ".join(f"{r[c][st]:.4f}" for c in ("dk1", "dk2")
+                                    for st in ("min", "max", "mean", "std"))
+                       + f" | {r['failed'] * 100:.1f} % | {r['seconds']:.2f} |")
+        out.append("")
+    return "\n".join(out)
+
+
+# ---------------------------------------------------------------------------------------------
+# Figs. 8 and 9: circle fits on arcs
+# ---------------------------------------------------------------------------------------------
+
+def arc_points(radius, n, spacing, sigma, rng, window=4.0):
+    """``n`` points of a circle of ``radius`` through the origin, tangent to the u axis.
+
+    The circle lies below the origin (centre (0, -radius)), i.e. convex under the normal
+    (0, 1): its curvature is +1 / radius in the estimator's convention. Points cover the arc
+    with |u| <= window / 2 (the lower half circle if the radius is smaller), evenly spaced in
+    angle ("regular") or uniformly at random ("random"), with isotropic Gaussian noise sigma.
+
+    Returns
+    -------
+    (n, 2) float
+    """
+    half = np.arcsin(min(1.0, 0.5 * window / radius))
+    if spacing == "regular":
+        phi = np.linspace(-half, half, n)
+    else:
+        phi = rng.uniform(-half, half, n)
+    pts = np.column_stack([radius * np.sin(phi), radius * (np.cos(phi) - 1.0)])
+    return pts + rng.normal(scale=sigma, size=pts.shape)
+
+
+def circle_curvature(points, normalization="unit"):
+    """Curvature of the circle through the origin centred on the normal line (0, 1).
+
+    ``points`` : (k, 2) float relative to the estimation point (which is added, exactly).
+    ``normalization`` : "unit" (the paper's |t| = 1 eigenvector) or "tangent" (t1 = 1, the
+    estimator's default), see :func:`meshcurv.cga.fit_normal_circle`.
+    """
+    from meshcurv.cga import fit_normal_circle
+
+    q = np.column_stack([points[:, 0], np.zeros(len(points)), points[:, 1]])
+    q = np.vstack([np.zeros((1, 3)), q])
+    return fit_normal_circle(q, np.array([0.0, 0.0, 1.0]), normalization=normalization)[0]
+
+
+def circle_fit_experiment(radii, n, spacing, sigma, trials, normalization, seed=0):
+    """Quartiles (25, 50, 75 %) of the estimated radius 1 / |kappa| per true radius, (m, 3).
+
+    The radius is unsigned, as the radius of a CGA sphere (sqrt(S^2)) that the paper plots;
+    the share of fits with the wrong sign (kappa <= 0) is returned as the second value, (m,).
+    """
+    rng = np.random.default_rng(seed)
+    out = np.empty((len(radii), 3))
+    wrong_sign = np.empty(len(radii))
+    for i, r in enumerate(radii):
+        kappa = np.array([circle_curvature(arc_points(r, n, spacing, sigma, rng), normalization)
+                          for _ in range(trials)])
+        # quantiles of |kappa| map to quantiles of 1 / |kappa| in reverse order
+        q = np.quantile(np.abs(kappa), [0.75, 0.5, 0.25])
+        with np.errstate(divide="ignore"):
+            out[i] = 1.0 / q
+        wrong_sign[i] = np.mean(kappa <= 0)
+    return out, wrong_sign
+
+
+def _radius_panel(ax, radii, curves, title):
+    ax.plot(radii, radii, "k:", lw=1, label="exact")
+    for label, q, color in curves:
+        ax.plot(radii, np.clip(q[:, 1], 1e-1, 1e6), "o-", ms=3, color=color, label=label)
+        ax.fill_between(radii, np.clip(q[:, 0], 1e-1, 1e6), np.clip(q[:, 2], 1e-1, 1e6),
+                        color=color, alpha=0.15)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_ylim(0.5, 1e6)
+    ax.set_xlabel("true radius")
+    ax.set_ylabel("estimated radius 1/|κ| (median, quartiles)")
+    ax.set_title(title, fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+
+
+def figure8(path, trials, radii):
+    """Fig. 8: 12 points, regular vs random spacing, without and with noise (sigma 0.5)."""
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.8))
+    summary = {}
+    for ax, norm in zip(axes, ("unit", "tangent")):
+        curves = []
+        for spacing, sigma, color in (("regular", 0.0, "C0"), ("random", 0.0, "C1"),
+                                      ("regular", 0.5, "C2"), ("random", 0.5, "C3")):
+            q, wrong = circle_fit_experiment(radii, 12, spacing, sigma, trials, norm)
+            summary[(norm, spacing, sigma, "wrong sign")] = wrong
+            curves.append((f"{spacing}, sigma {sigma}", q, color))
+            summary[(norm, spacing, sigma)] = q
+        _radius_panel(ax, radii, curves, f"12 points, {'|t| = 1 (paper)' if norm == 'unit' else 't1 = 1 (meshcurv)'}")
+    fig.suptitle("Fig. 8: circle fits on arcs in a window of width 4", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+    return summary
+
+
+def figure9(path, trials, radii):
+    """Fig. 9: 4, 12, 24 random points with noise sigma 0.5."""
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.8))
+    summary = {}
+    for ax, norm in zip(axes, ("unit", "tangent")):
+        curves = []
+        for n, color in ((4, "C0"), (12, "C1"), (24, "C2")):
+            q, wrong = circle_fit_experiment(radii, n, "random", 0.5, trials, norm, seed=n)
+            summary[(norm, n, "wrong sign")] = wrong
+            curves.append((f"{n} points", q, color))
+            summary[(norm, n)] = q
+        _radius_panel(ax, radii, curves, f"random, sigma 0.5, {'|t| = 1 (paper)' if norm == 'unit' else 't1 = 1 (meshcurv)'}")
+    fig.suptitle("Fig. 9: circle fits and the number of points", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+    return summary
+
+
+# ---------------------------------------------------------------------------------------------
+# Fig. 10: sine fit
+# ---------------------------------------------------------------------------------------------
+
+# Euler model kappa(theta) = A + B cos 2theta + C sin 2theta of Fig. 10 (k1 = 0.5, k2 = 0.1).
+EULER_TRUTH = (0.3, 0.2 * np.cos(0.8), 0.2 * np.sin(0.8))
+
+
+def sine_fit_experiment(counts, sigmas, trials, seed=0):
+    """RMS errors of the Euler (sine) fit; dict sigma -> (residual RMS, model RMS, |dk1|), each
+    (len(counts),) (means over the trials).
+
+    Samples sit at theta_i = i pi / n (directions over a half turn, the model's period), with
+    Gaussian noise sigma on kappa. "residual RMS" is the paper's measure (samples against the
+    fitted function); "model RMS" compares the fitted and the true function over all angles.
+    """
+    from meshcurv.sinefit import euler_design
+
+    rng = np.random.default_rng(seed)
+    truth = np.asarray(EULER_TRUTH)
+    dense = euler_design(np.linspace(0, np.pi, 181))
+    k1_true = truth[0] + np.hypot(truth[1], truth[2])
+    out = {}
+    for sigma in sigmas:
+        res, model, dk1 = [], [], []
+        for n in counts:
+            design = euler_design(np.arange(n) * np.pi / n)
+            r_t, m_t, k_t = [], [], []
+            for _ in range(trials):
+                kappa = design @ truth + rng.normal(scale=sigma, size=n)
+                sol = np.linalg.lstsq(design, kappa, rcond=None)[0]
+                r_t.append(np.sqrt(np.mean((kappa - design @ sol) ** 2)))
+                m_t.append(np.sqrt(np.mean((dense @ (sol - truth)) ** 2)))
+                k_t.append(abs(sol[0] + np.hypot(sol[1], sol[2]) - k1_true))
+            res.append(np.mean(r_t))
+            model.append(np.mean(m_t))
+            dk1.append(np.mean(k_t))
+        out[sigma] = (np.array(res), np.array(model), np.array(dk1))
+    return out
+
+
+def figure10(path, counts, sigmas, trials):
+    import matplotlib.pyplot as plt
+
+    data = sine_fit_experiment(counts, sigmas, trials)
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.6))
+    for i, sigma in enumerate(sigmas):
+        res, model, _ = data[sigma]
+        axes[0].plot(counts, res, "o-", ms=3, color=f"C{i}", label=f"sigma {sigma}")
+        axes[1].plot(counts, model, "o-", ms=3, color=f"C{i}", label=f"sigma {sigma}")
+    for ax, title in zip(axes, ("residual RMS (samples vs fit, the paper's measure)",
+                                "model RMS (fit vs true function)")):
+        ax.set_xlabel("samples")
+        ax.set_title(title, fontsize=9)
+        ax.set_yscale("symlog", linthresh=1e-4)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.suptitle("Fig. 10: sine (Euler model) fit, k1 = 0.5, k2 = 0.1", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+    return data
+
+
+# ---------------------------------------------------------------------------------------------
+# Report
+# ---------------------------------------------------------------------------------------------
+
+def _radius_rows(radii, summary, keys, labels):
+    """Median estimated radius (and the share of wrong-sign fits) per true radius."""
+    head = "| true radius | " + " | ".join(labels) + " |"
+    out = [head, "|---|" + "---|" * len(labels)]
+    for i, r in enumerate(radii):
+        cells = []
+        for key in keys:
+            med = summary[key][i, 1]
+            wrong = summary[(*key, "wrong sign")][i]
+            cells.append(f"{med:.4g} ({wrong * 100:.0f} %)")
+        out.append(f"| {r:g} | " + " | ".join(cells) + " |")
+    return "\n".join(out)
+
+
+def write_report(path, mode, table2, fig8, fig9, fig10, radii, counts, sigmas, trials, seconds):
+    shown = [i for i, r in enumerate(radii) if r in (1, 10, 100, 1000, 10000)]
+    sub = radii[shown]
+    sel8 = {k: v[shown] for k, v in fig8.items()}
+    sel9 = {k: v[shown] for k, v in fig9.items()}
+    lines = [
+        "# Reproduction of the paper's evaluation",
+        "",
+        f"Generated by `python scripts/reproduce_paper.py{' --quick' if mode == 'quick' else ''}` "
+        f"in {seconds:.0f} s. Paper: Seibert, Hildenbrand, Becker, Kuijper, CGA circle fits for "
+        "principal curvatures. Sign convention: outward normal, convex positive, k1 >= k2.",
+        "",
+        "## Table 2: paraboloid z = 0.2 x² + 0.1 y², radius 2, 8 directions",
+        "",
+        "The paper lists 13926 points for a regular grid with Δx = 0.11 on [-10, 10]²; those "
+        "two numbers disagree (a 0.11 grid has 33124 points, 13926 is a 118 x 118 grid), so "
+        "both grids are run where time allows. Normals from the faces. Settings: **paper** = "
+        "the algorithm as published (|t| = 1 circle fits, nominal plane angles in the sine fit, "
+        "no outlier rejection, equal weights, slab 0.25 R); **meshcurv defaults** = the "
+        "library's current defaults; **weighting none** = defaults with equal weights.",
+        "",
+        table2_markdown(table2),
+        "## Figs. 8 and 9: circle fits on arcs",
+        "",
+        f"{trials} trials per radius. Points on an arc through the estimation point (exact, "
+        "with its exact normal), window of width 4, isotropic Gaussian noise σ on the arc "
+        "points. Left panels: the paper's |t| = 1 eigenvector fit; right panels: meshcurv's "
+        "t1 = 1 normalisation. Radius = 1 / κ; median and quartile band.",
+        "",
+        "![Fig. 8](paper_fig8_circle_fit.png)",
+        "",
+        "Median estimated radius, 12 points (Fig. 8):",
+        "",
+        _radius_rows(sub, sel8, [("unit", "regular", 0.0), ("unit", "random", 0.0),
+                                 ("unit", "regular", 0.5), ("unit", "random", 0.5),
+                                 ("tangent", "regular", 0.5), ("tangent", "random", 0.5)],
+                     ["regular σ 0", "random σ 0", "regular σ 0.5", "random σ 0.5",
+                      "regular σ 0.5, t1 = 1", "random σ 0.5, t1 = 1"]),
+        "",
+        "![Fig. 9](paper_fig9_point_count.png)",
+        "",
+        "Median estimated radius, random spacing, σ = 0.5 (Fig. 9):",
+        "",
+        _radius_rows(sub, sel9, [("unit", 4), ("unit", 12), ("unit", 24), ("tangent", 4),
+                                 ("tangent", 12), ("tangent", 24)],
+                     ["4 points", "12 points", "24 points", "4, t1 = 1", "12, t1 = 1",
+                      "24, t1 = 1"]),
+        "",
+        "## Fig. 10: sine fit",
+        "",
+        f"Euler model κ(θ) = A + B cos 2θ + C sin 2θ with k1 = 0.5, k2 = 0.1, samples at "
+        f"θ_i = iπ/n, Gaussian noise σ on κ, {trials} trials per point.",
+        "",
+        "![Fig. 10](paper_fig10_sine_fit.png)",
+        "",
+        "| samples | " + " | ".join(f"σ {s}: residual / model RMS / mean\\|Δk1\\|" for s in sigmas)
+        + " |",
+        "|---|" + "---|" * len(sigmas),
+    ]
+    for i, n in enumerate(counts):
+        if n in (4, 8, 16, 32, 64, 100):
+            lines.append(f"| {n} | " + " | ".join(
+                f"{fig10[s][0][i]:.4f} / {fig10[s][1][i]:.4f} / {fig10[s][2][i]:.4f}"
+                for s in sigmas) + " |")
+    lines += ["", "## Findings", "", *FINDINGS, ""]
+    with open(path, "w") as fh:
+        fh.write("\n".join(lines))
+
+
+# Written from the numbers this script produced (docs/paper_reproduction.md); re-read them
+# after changing the estimator.
+FINDINGS = [
+    "- Table 2: see the tables above; the published algorithm's mean errors are compared with "
+    "the paper's 0.008 / 0.019 (Δκ1 / Δκ2 mean).",
+    "- Figs. 8 and 9: without noise every fit returns the exact radius (regular or random, any "
+    "point count). With σ = 0.5 in a window of width 4 the sagitta of a radius-R arc is "
+    "4 / (2 R) · ... = 2 / R, which falls below the noise near R ≈ 4: beyond that the fit "
+    "measures noise and the median radius saturates (the paper's 'overestimation'); "
+    "more points lower the spread but not the saturation.",
+    "- Fig. 10: the residual RMS tends to σ·sqrt(1 - 3 / n) (three parameters fitted), the model "
+    "RMS to σ·sqrt(3 / n): the sine fit itself is unbiased and the errors of the principal "
+    "curvatures come from the circle fits, as the paper concludes.",
+]
+
+
+def main(argv=None):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="fewer trials and grids")
+    ap.add_argument("--out", default=os.path.join(ROOT, "docs"), help="output folder")
+    args = ap.parse_args(argv)
+    os.makedirs(args.out, exist_ok=True)
+    t0 = time.perf_counter()
+    trials = 100 if args.quick else 400
+    radii = np.logspace(0, 4, 17)
+    counts = np.array([4, 5, 6, 8, 10, 12, 16, 20, 24, 32, 40, 50, 64, 80, 100])
+    sigmas = (0.0, 0.01, 0.05, 0.1)
+
+    table2 = run_table2(quick=args.quick)
+    print(table2_markdown(table2), flush=True)
+    fig8 = figure8(os.path.join(args.out, "paper_fig8_circle_fit.png"), trials, radii)
+    fig9 = figure9(os.path.join(args.out, "paper_fig9_point_count.png"), trials, radii)
+    fig10 = figure10(os.path.join(args.out, "paper_fig10_sine_fit.png"), counts, sigmas, trials)
+    path = os.path.join(args.out, "paper_reproduction.md")
+    write_report(path, "quick" if args.quick else "full", table2, fig8, fig9, fig10, radii,
+                 counts, sigmas, trials, time.perf_counter() - t0)
+    print("wrote", path)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

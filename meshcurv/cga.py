@@ -64,24 +64,30 @@ def circle_fit_rows(q, normal):
     return np.column_stack([q @ normal, -np.ones(len(q)), -0.5 * np.einsum("ij,ij->i", q, q)])
 
 
-def fit_normal_circle(q, normal, weights=None):
+def fit_normal_circle(q, normal, weights=None, normalization="tangent"):
     """Signed curvature of the best sphere centred on the normal line through x (at the origin).
 
-    Minimises ``sum_j w_j (P_j . S)^2`` over ``|t| = 1``: t is the eigenvector of the smallest
-    eigenvalue of ``B = W^T diag(w) W``. The sphere's centre is at ``x + (t1 / t3) n``, so the
-    curvature is ``kappa = -t3 / t1``: positive where the points bend away from the normal
-    (a convex cap under an outward normal), zero for a straight line.
+    Minimises ``sum_j w_j (P_j . S)^2 = t^T B t`` with ``B = W^T diag(w) W`` (rows W from
+    :func:`circle_fit_rows`). The sphere's centre is at ``x + (t1 / t3) n``, so the curvature is
+    ``kappa = -t3 / t1``: positive where the points bend away from the normal (a convex cap under
+    an outward normal), zero for a straight line.
 
     Parameters
     ----------
     q : (k, 3) float, points relative to x (x itself contributes the row (0, -1, 0))
     normal : (3,) float, unit normal at x
     weights : (k,) float, optional
+    normalization : {"tangent", "unit"}
+        "unit": ``|t| = 1``, t is the eigenvector of the smallest eigenvalue of B (the paper).
+        "tangent": ``t1 = 1``, the generalised eigenproblem ``B t = lambda diag(1, 0, 0) t``,
+        solved as the 2x2 system ``B[1:, 1:] t[1:] = -B[1:, 0]``. Both give the same sphere on
+        exact data; with noise the unit form can drift towards spheres centred at x (t1 -> 0,
+        unbounded kappa), the tangent form cannot.
 
     Returns
     -------
     kappa : float, 1 / length units of q
-    residual : float, the smallest eigenvalue of B (sum of squared algebraic distances)
+    residual : float, ``t^T B t / t1^2``: the weighted sum of squared height residuals
 
     Examples
     --------
@@ -95,6 +101,13 @@ def fit_normal_circle(q, normal, weights=None):
         b = (w * np.asarray(weights, dtype=np.float64)[:, None]).T @ w
     else:
         b = w.T @ w
-    vals, vecs = np.linalg.eigh(b)
-    t = vecs[:, 0]
-    return -t[2] / t[0], vals[0]
+    if normalization == "unit":
+        vals, vecs = np.linalg.eigh(b)
+        t = vecs[:, 0]
+        return -t[2] / t[0], max(vals[0], 0.0) / t[0] ** 2
+    if normalization != "tangent":
+        raise ValueError(f"normalization must be 'tangent' or 'unit', got {normalization!r}")
+    if not np.linalg.det(b[1:, 1:]) > 1e-14 * b[1, 1] * b[2, 2]:
+        return np.nan, np.nan     # all points at one distance from x: no circle is defined
+    t = np.concatenate([[1.0], np.linalg.solve(b[1:, 1:], -b[1:, 0])])
+    return -t[2], max(float(t @ b @ t), 0.0)

@@ -270,7 +270,8 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
     elif method == "faces":
         if f is None:
             raise ValueError("normal_estimation='faces' needs faces")
-        nv = nrm.face_vertex_normals(v, f)
+        with np.errstate(invalid="ignore"):       # NaN vertices give NaN normals
+            nv = nrm.face_vertex_normals(v, f)
     else:
         need = query if (f is not None or not isinstance(orientation, str)) else np.arange(n)
         nv = np.full((n, 3), np.nan)

@@ -23,6 +23,9 @@ N_ACC = 12
 # bias of p = 4 on the Table 2 paraboloid; p = 8 gains little more and doubles the noise again).
 WEIGHT_POWER = 4
 
+# Plane i makes the angle (i + PLANE_OFFSET) * pi / ndir with the tangent frame's first axis.
+PLANE_OFFSET = 0.25
+
 # Points per chunk handed to one thread (keeps scratch arrays per chunk, not per point).
 CHUNK = 256
 
@@ -114,13 +117,18 @@ def _smallest_eigvec_sym3(a11, a12, a13, a22, a23, a33, out):
 def _tangent_frame(points, nbr, lo, hi, x, n, r2max, tu, tv):
     """Tangent frame (tu, tv, n) that rotates with the data.
 
-    tu is the tangential part of the offset to the first neighbour (in list order) lying at least
-    30 degrees off the normal, so the frame - and with it the sampling planes - is equivariant
-    under rotation, translation and scaling. Falls back to a fixed frame if there is none.
+    tu is the tangential part of the offset to the neighbour of lowest index lying at least
+    30 degrees off the normal. The choice depends on neither the order of the neighbour list
+    nor the coordinates' position, scale or orientation, so the frame - and with it the
+    sampling planes - is equivariant under rotation, translation and scaling. Falls back to a
+    fixed frame if there is no such neighbour.
     """
     found = False
+    best = -1
     for j in range(lo, hi):
         k = nbr[j]
+        if found and k >= best:
+            continue
         qx = points[k, 0] - x[0]
         qy = points[k, 1] - x[1]
         qz = points[k, 2] - x[2]
@@ -137,7 +145,7 @@ def _tangent_frame(points, nbr, lo, hi, x, n, r2max, tu, tv):
             tu[1] = uy * s
             tu[2] = uz * s
             found = True
-            break
+            best = k
     if not found:
         # any unit vector orthogonal to n
         if abs(n[0]) < 0.9:
@@ -432,8 +440,10 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
     ca = np.empty(ndir)
     sa = np.empty(ndir)
     for i in range(ndir):
-        ca[i] = math.cos(i * math.pi / ndir)
-        sa[i] = math.sin(i * math.pi / ndir)
+        # planes a quarter step off the frame's axis: no point lies exactly on a half-set
+        # boundary because of the frame or of a regular grid, so rounding cannot flip it
+        ca[i] = math.cos((i + PLANE_OFFSET) * math.pi / ndir)
+        sa[i] = math.sin((i + PLANE_OFFSET) * math.pi / ndir)
     nchunks = (m + CHUNK - 1) // CHUNK
     for c in prange(nchunks):
         acc = np.empty((nh, N_ACC))
@@ -1098,3 +1108,149 @@ def pca_normals_csr(points, query_points, indptr, indices, radius):
             out[q, 1] = ev[1]
             out[q, 2] = ev[2]
     return out
+
+
+# ---------------------------------------------------------------------------------------------
+# Dense cell grid for ball queries (speed; see scripts/bench.py).
+#
+# Cells of edge >= radius numbered x-major, z fastest: the three cells (ax, ay, cz-1..cz+1) of a
+# column are consecutive, so a ball query scans 9 contiguous runs of a copy of the points sorted
+# by cell, instead of 27 cells scattered through the input.
+
+
+@njit(cache=True)
+def _cell_coord(value, origin, inv, size):
+    c = math.floor((value - origin) * inv)
+    return np.int64(min(max(c, -1.0), float(size)))
+
+
+@njit(cache=True)
+def cell_grid_build(points, finite_index, origin, cell, dims):
+    """Counting sort of ``points[finite_index]`` into a dense grid of ``dims`` cells of edge ``cell``.
+
+    Returns ``(order, sorted_points, cell_start)``: ``order`` (k,) int64 lists point indices cell
+    by cell (ascending within a cell), ``sorted_points`` (k, 3) their coordinates in that order,
+    and cell ``(cx * ny + cy) * nz + cz`` holds positions ``cell_start[c]:cell_start[c + 1]``.
+    Every point must lie inside the grid (``origin`` at least one cell below the minimum).
+    """
+    nx, ny, nz = dims[0], dims[1], dims[2]
+    k = finite_index.shape[0]
+    inv = 1.0 / cell
+    keys = np.empty(k, dtype=np.int64)
+    cell_start = np.zeros(nx * ny * nz + 1, dtype=np.int64)
+    for j in range(k):
+        i = finite_index[j]
+        cx = _cell_coord(points[i, 0], origin[0], inv, nx)
+        cy = _cell_coord(points[i, 1], origin[1], inv, ny)
+        cz = _cell_coord(points[i, 2], origin[2], inv, nz)
+        key = (cx * ny + cy) * nz + cz
+        keys[j] = key
+        cell_start[key + 1] += 1
+    for c in range(nx * ny * nz):
+        cell_start[c + 1] += cell_start[c]
+    fill = cell_start[:-1].copy()
+    order = np.empty(k, dtype=np.int64)
+    sorted_points = np.empty((k, 3))
+    for j in range(k):
+        pos = fill[keys[j]]
+        fill[keys[j]] += 1
+        i = finite_index[j]
+        order[pos] = i
+        sorted_points[pos, 0] = points[i, 0]
+        sorted_points[pos, 1] = points[i, 1]
+        sorted_points[pos, 2] = points[i, 2]
+    return order, sorted_points, cell_start
+
+
+@njit(cache=True)
+def _cell_ball_one(order, sorted_points, cell_start, origin, inv, dims, x0, x1, x2, r2max,
+                   out, base, limit):
+    """Indices of the grid points within ``sqrt(r2max)`` of (x0, x1, x2), ascending.
+
+    Writes to ``out[base:]`` as far as ``limit`` allows (sorted only if all fit) and returns
+    the count.
+    """
+    if not np.isfinite(x0 + x1 + x2):
+        return 0
+    nx, ny, nz = dims[0], dims[1], dims[2]
+    cx = _cell_coord(x0, origin[0], inv, nx)
+    cy = _cell_coord(x1, origin[1], inv, ny)
+    cz = _cell_coord(x2, origin[2], inv, nz)
+    z0 = max(cz - 1, 0)
+    z1 = min(cz + 1, nz - 1)
+    found = 0
+    if z0 > z1:
+        return 0
+    for ax in range(max(cx - 1, 0), min(cx + 2, nx)):
+        for ay in range(max(cy - 1, 0), min(cy + 2, ny)):
+            col = (ax * ny + ay) * nz
+            for j in range(cell_start[col + z0], cell_start[col + z1 + 1]):
+                d0 = sorted_points[j, 0] - x0
+                d1 = sorted_points[j, 1] - x1
+                d2 = sorted_points[j, 2] - x2
+                if d0 * d0 + d1 * d1 + d2 * d2 <= r2max:
+                    if base + found < limit:
+                        out[base + found] = order[j]
+                    found += 1
+    if base + found <= limit:
+        out[base:base + found].sort()
+    return found
+
+
+@njit(parallel=True, cache=True)
+def cell_ball_csr(order, sorted_points, cell_start, origin, cell, dims, query_points, radius,
+                  nthreads):
+    """All grid points within ``radius`` of each query point, CSR with ascending indices.
+
+    The grid comes from :func:`cell_grid_build` with ``cell >= radius``. Each thread streams
+    its contiguous range of queries into its own slice of a scratch buffer sized from a sample
+    of the queries; a thread whose slice overflows searches its range again into the output.
+    """
+    m = query_points.shape[0]
+    r2max = radius * radius
+    inv = 1.0 / cell
+    counts = np.zeros(m + 1, dtype=np.int64)
+    nthreads = max(1, min(m, nthreads))
+    per = (m + nthreads - 1) // nthreads
+    dummy = np.empty(0, dtype=np.int64)
+    step = max(1, m // 64)
+    tot = 0
+    cnt = 0
+    for qi in range(0, m, step):
+        tot += _cell_ball_one(order, sorted_points, cell_start, origin, inv, dims,
+                              query_points[qi, 0], query_points[qi, 1], query_points[qi, 2],
+                              r2max, dummy, 0, 0)
+        cnt += 1
+    cap = 16 + (3 * tot) // (2 * max(cnt, 1))
+    buf = np.empty(nthreads * per * cap, dtype=np.int64)
+    used = np.zeros(nthreads, dtype=np.int64)
+    for t in prange(nthreads):
+        lo = t * per * cap
+        limit = lo + per * cap
+        pos = lo
+        for qi in range(t * per, min(m, (t + 1) * per)):
+            f = _cell_ball_one(order, sorted_points, cell_start, origin, inv, dims,
+                               query_points[qi, 0], query_points[qi, 1], query_points[qi, 2],
+                               r2max, buf, pos, limit)
+            counts[qi + 1] = f
+            pos += f
+        used[t] = pos - lo
+    for i in range(m):
+        counts[i + 1] += counts[i]
+    indices = np.empty(counts[m], dtype=np.int64)
+    for t in prange(nthreads):
+        q0 = t * per
+        if q0 >= m:
+            continue
+        q1 = min(m, (t + 1) * per)
+        if used[t] <= per * cap:
+            lo = t * per * cap
+            o = counts[q0]
+            for j in range(used[t]):
+                indices[o + j] = buf[lo + j]
+        else:
+            for qi in range(q0, q1):
+                _cell_ball_one(order, sorted_points, cell_start, origin, inv, dims,
+                               query_points[qi, 0], query_points[qi, 1], query_points[qi, 2],
+                               r2max, indices, counts[qi], counts[qi + 1])
+    return counts, indices

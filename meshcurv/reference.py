@@ -8,6 +8,7 @@ Slow and readable: the paper's steps for a single point, built from :mod:`meshcu
 import numpy as np
 
 from .cga import fit_normal_circle
+from .kernels import PLANE_OFFSET, WEIGHT_POWER
 from .sinefit import fit_euler
 
 __all__ = ["curvature_at_point"]
@@ -25,21 +26,24 @@ def _tangent_u(q, n):
 
 
 def curvature_at_point(x, n, neighbours, radius, n_directions=8, slab=0.25, min_points=3,
-                       min_spread=0.25, weighted=False, corrected=True, half_frequency=False,
-                       robust=True):
+                       min_spread=0.25, weighting="distance", circle_normalization="tangent",
+                       section_blend=True, half_frequency=False, robust=True):
     """Principal curvatures at one point from its neighbours (the kernel's contract, in numpy).
 
     Parameters
     ----------
     x : (3,) float, the point; n : (3,) float, its unit normal (outward)
-    neighbours : (k, 3) float, candidate neighbours in list order (x itself and points beyond
-        ``radius`` are ignored)
+    neighbours : (k, 3) float, candidate neighbours sorted by vertex index (x itself and points
+        beyond ``radius`` are ignored); the first one at least 30 degrees off the normal sets
+        the tangent frame, as the lowest-index one does in the kernel
     radius : float, model units; ``slab`` and ``min_spread`` are fractions of it
     other parameters : as in :func:`meshcurv.principal_curvatures`
 
     Returns
     -------
-    k1, k2 : float (NaN if undefined); d1 : (3,) float; n_samples : int; residual : float
+    dict with k1, k2 (float, NaN if undefined, 1 / model units), d1 ((3,) unit), n_samples
+    (int, circle fits kept), residual (float, RMS of the Euler fit, 1 / model units) and noise
+    (float, height noise measured by the circle fits, model units)
     """
     x = np.asarray(x, dtype=np.float64)
     n = np.asarray(n, dtype=np.float64)
@@ -50,16 +54,17 @@ def curvature_at_point(x, n, neighbours, radius, n_directions=8, slab=0.25, min_
     tu = _tangent_u(q, n)
     tv = np.cross(n, tu)
     q = q / radius  # all fits in units of the radius
-    u, v, h = q @ tu, q @ tv, q @ n
+    u, v = q @ tu, q @ tv
     keep = u * u + v * v > 0
     q, u, v = q[keep], u[keep], v[keep]
     r2 = np.einsum("ij,ij->i", q, q)
     phi = np.arctan2(v, u)
-    w = (1 - r2) ** 2 if weighted else np.ones(len(q))
+    w = (1 - r2) ** WEIGHT_POWER if weighting == "distance" else np.ones(len(q))
 
     kappas, rows, planes = [], [], set()
+    noise_ss = noise_dof = 0.0
     for i in range(n_directions):
-        alpha = i * np.pi / n_directions
+        alpha = (i + PLANE_OFFSET) * np.pi / n_directions
         dist = -np.sin(alpha) * u + np.cos(alpha) * v    # distance to plane i (through x)
         along = np.cos(alpha) * u + np.sin(alpha) * v    # coordinate along the plane's tangent
         in_slab = np.abs(dist) <= slab
@@ -68,9 +73,11 @@ def curvature_at_point(x, n, neighbours, radius, n_directions=8, slab=0.25, min_
                 continue
             pts = np.vstack([np.zeros(3), q[half]])          # x itself is in every half-set
             wt = np.concatenate([[1.0], w[half]])
-            kappa, _ = fit_normal_circle(pts, n, wt)
+            kappa, ss = fit_normal_circle(pts, n, wt, circle_normalization)
+            if not np.isfinite(kappa):
+                continue
             theta = alpha + side * np.pi
-            if corrected:
+            if section_blend:
                 # the blend of directions this half-set measured (see kernels._sample_design)
                 rr = np.concatenate([[0.0], r2[half]])
                 wp = wt * rr * (rr - np.sum(wt * rr) / wt.sum())
@@ -82,10 +89,17 @@ def curvature_at_point(x, n, neighbours, radius, n_directions=8, slab=0.25, min_
             kappas.append(kappa)
             rows.append(row)
             planes.add(i)
+            if len(pts) > 3:     # height noise: residual per unit weight, 3 parameters a circle
+                noise_ss += ss / wt.sum() * len(pts)
+                noise_dof += len(pts) - 3
+    out = dict(k1=np.nan, k2=np.nan, d1=np.full(3, np.nan), n_samples=len(kappas),
+               residual=np.nan, noise=np.nan)
     if len(planes) < 3 or len(kappas) < 5:
-        return np.nan, np.nan, np.full(3, np.nan), len(kappas), np.nan
+        return out
     k1, k2, theta1, rms, used = fit_euler(np.array(rows), np.array(kappas), robust=robust)
     if not np.isfinite(k1):
-        return np.nan, np.nan, np.full(3, np.nan), len(kappas), np.nan
-    d1 = np.cos(theta1) * tu + np.sin(theta1) * tv
-    return k1 / radius, k2 / radius, d1, int(used.sum()), rms / radius
+        return out
+    out.update(k1=k1 / radius, k2=k2 / radius, d1=np.cos(theta1) * tu + np.sin(theta1) * tv,
+               n_samples=int(used.sum()), residual=rms / radius,
+               noise=np.sqrt(noise_ss / noise_dof) * radius if noise_dof else np.nan)
+    return out

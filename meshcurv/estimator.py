@@ -119,7 +119,8 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
                          neighborhood="auto", *, slab=0.25, min_points=3, min_spread=0.25,
                          weighting="distance", circle_normalization="tangent",
                          section_blend=True, robust=True,
-                         half_frequency=False, normal_estimation="auto", orientation="mst",
+                         half_frequency=False, normal_estimation="auto", refine_normals=None,
+                         orientation="mst",
                          query=None, progress=False):
     """Principal curvatures by CGA circle fits in normal sections (Seibert et al.).
 
@@ -181,6 +182,12 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
         Used when ``normals`` is None. "faces": area-weighted face normals. "pca": normal of
         the least-squares plane through the same neighbourhood, oriented by the faces if there
         are any, else by ``orientation``. "auto": "faces" for meshes, "pca" for point clouds.
+    refine_normals : bool or None, default None
+        Refine the normals by a local quadric fit over the same neighbourhood before the
+        circle fits (:func:`meshcurv.kernels.refine_normals_quadric`). Face and PCA normals
+        tilt with irregular sampling (0.7 degrees on a random sphere), which costs up to 3 %
+        in curvature; the quadric's normal does not. None: refine estimated normals, use given
+        ones as they are; True: refine given normals too; False: never.
     orientation : "mst" or (3,) array-like
         Global orientation of estimated point-cloud normals: "mst" propagates along a minimum
         spanning tree and then points away from the centroid; a (3,) point orients every
@@ -298,10 +305,13 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
     qn = nv[query]
     with np.errstate(invalid="ignore", divide="ignore"):
         qn = qn / np.linalg.norm(qn, axis=1, keepdims=True)
+    refine = given_normals is None if refine_normals is None else bool(refine_normals)
     pos = 0
     for idx in _blocks(query, progress, "curvature"):
         indptr, indices = neighbours(idx)
         sl = slice(pos, pos + len(idx))
+        if refine:
+            kernels.refine_normals_quadric(v, v[idx], qn[sl], indptr, indices, radius)
         kernels.curvature_cga(
             v, v[idx], np.ascontiguousarray(qn[sl]), indptr, indices, radius, int(n_directions),
             float(slab), float(min_points), float(min_spread), weighting == "distance",

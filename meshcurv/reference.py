@@ -11,7 +11,7 @@ from .cga import fit_normal_circle
 from .kernels import PLANE_OFFSET, WEIGHT_POWER
 from .sinefit import fit_euler
 
-__all__ = ["curvature_at_point"]
+__all__ = ["curvature_at_point", "quadric_normal"]
 
 
 def _tangent_u(q, n):
@@ -103,3 +103,39 @@ def curvature_at_point(x, n, neighbours, radius, n_directions=8, slab=0.25, min_
                n_samples=int(used.sum()), residual=rms / radius,
                noise=np.sqrt(noise_ss / noise_dof) * radius if noise_dof else np.nan)
     return out
+
+
+def quadric_normal(x, n, neighbours, radius):
+    """Normal at x of the quadric height field fitted around it (the kernel's normal refinement).
+
+    Parameters
+    ----------
+    x, n : (3,) float, the point and its initial unit normal
+    neighbours : (k, 3) float; points beyond ``radius`` and x itself are ignored
+    radius : float, model units
+
+    Returns
+    -------
+    (3,) float, unit normal on n's side; n itself when the fit is singular or tilts over 30 deg
+    """
+    x = np.asarray(x, dtype=np.float64)
+    n = np.asarray(n, dtype=np.float64)
+    a = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    tu = np.cross(a, n)
+    tu /= np.linalg.norm(tu)
+    tv = np.cross(n, tu)
+    q = np.asarray(neighbours, dtype=np.float64) - x
+    d2 = np.einsum("ij,ij->i", q, q)
+    q = q[(d2 > 0) & (d2 <= radius * radius)] / radius
+    u, v, h = q @ tu, q @ tv, q @ n
+    design = np.vstack([np.column_stack([u * u, u * v, v * v, u, v, np.ones_like(u)]),
+                        [0, 0, 0, 0, 0, 1.0]])                  # x itself, weight 1
+    w = np.concatenate([1 - np.einsum("ij,ij->i", q, q), [1.0]])
+    lhs = design.T @ (w[:, None] * design)
+    if np.linalg.matrix_rank(lhs) < 6:
+        return n
+    coef = np.linalg.solve(lhs, design.T @ (w * np.concatenate([h, [0.0]])))
+    if coef[3] ** 2 + coef[4] ** 2 > 1 / 3:
+        return n
+    g = n - coef[3] * tu - coef[4] * tv
+    return g / np.linalg.norm(g)

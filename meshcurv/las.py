@@ -120,7 +120,8 @@ def iter_las_chunks(path, chunk_size=DEFAULT_CHUNK, start=0, stop=None, with_rec
             if pos:
                 reader.seek(pos)
         except Exception as e:
-            raise LasReadError(f"{path}: cannot seek to point {pos} ({type(e).__name__}: {e})") from e
+            raise LasReadError(f"{path}: cannot seek to point {pos}; the file is truncated or "
+                               f"corrupt ({type(e).__name__}: {e})") from e
         while pos < stop:
             want = min(int(chunk_size), stop - pos)
             try:

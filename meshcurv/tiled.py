@@ -388,6 +388,8 @@ def _tile_flips(work, names):
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import breadth_first_order, connected_components, minimum_spanning_tree
 
+    if not names:
+        return {}
     pos = {n: i for i, n in enumerate(names)}
 
     def npz(name, *keys):
@@ -567,7 +569,7 @@ def _run(client, jobs, desc, unit, in_path, progress):
             except (TileError, las.LasReadError):
                 raise
             except Exception as e:  # KilledWorker, CommClosedError, ...: the worker is gone
-                raise TileError(f"{unit} {name} of {in_path}: {desc} task lost "
+                raise TileError(f"{unit} {name} of {in_path}: {desc} task failed "
                                 f"({type(e).__name__}: {e})") from e
             bar.update(1)
     except BaseException:

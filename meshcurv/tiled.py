@@ -479,6 +479,9 @@ def _curvature_task(name, work, chunk_ids, radius, orientation, options, in_path
                 with np.load(os.path.join(work, "normals", f"{name}.npz")) as z:
                     normals = np.full(xyz.shape, np.nan)
                     normals[own] = z["own_normals"] * float(flip)
+                # these normals were estimated: treat them as the estimator treats its own
+                if options.get("refine_normals") is None:
+                    options = dict(options, refine_normals=True)
             res = _estimate_tile(xyz, own, normals, radius, orientation, options)
             rows = _result_rows(res)
             out = os.path.join(work, "results", name)

@@ -1436,6 +1436,14 @@ def orient_spanning_tree(normals, neighbors, levels):
             j = neighbors[i, a]
             if j < 0:
                 continue
+            if j < i:
+                # an edge listed from both ends is sorted once
+                dup = False
+                for b in range(k):
+                    if neighbors[j, b] == i:
+                        dup = True
+                if dup:
+                    continue
             c = abs(normals[i, 0] * normals[j, 0] + normals[i, 1] * normals[j, 1]
                     + normals[i, 2] * normals[j, 2])
             if not np.isfinite(c):

@@ -79,8 +79,11 @@ def kring_neighbors(points, adjacency, radius, query, work=None):
 class BallGrid(NamedTuple):
     """Uniform grid over the finite points of a cloud for ball queries of one radius.
 
-    Built by :func:`ball_grid`; ``order`` lists point indices cell by cell, ascending within a
-    cell; the hash table ``table_keys``/``table_cells`` finds a cell from its packed key.
+    Built by :func:`ball_grid`. Dense form (``dims`` set): cells numbered x-major, z fastest,
+    ``order`` lists point indices cell by cell (ascending within a cell), ``sorted_points``
+    their coordinates in that order, and ``cell_start`` the start of each cell. Hashed form
+    (``dims`` None, for sparse extents): ``order``/``cell_start`` over the occupied cells only,
+    found from their packed keys through ``table_keys``/``table_cells``.
     """
 
     points: np.ndarray
@@ -89,8 +92,14 @@ class BallGrid(NamedTuple):
     cell: float
     order: np.ndarray
     cell_start: np.ndarray
-    table_keys: np.ndarray
-    table_cells: np.ndarray
+    dims: np.ndarray = None
+    sorted_points: np.ndarray = None
+    table_keys: np.ndarray = None
+    table_cells: np.ndarray = None
+
+
+# Dense grids hold up to this many cells per point (int64 each); sparser extents are hashed.
+_DENSE_CELLS_PER_POINT = 4
 
 
 def ball_grid(points, radius):
@@ -103,6 +112,9 @@ def ball_grid(points, radius):
     Parameters
     ----------
     points : (n, 3) float64; radius : float, model units
+
+    Memory: 32 bytes per point (sorted copy and order) plus 8 per cell; at most
+    ``4 * n + 2**20`` cells are allocated densely, beyond that only occupied cells are hashed.
     """
     p = np.ascontiguousarray(points, dtype=np.float64)
     radius = float(radius)
@@ -116,13 +128,18 @@ def ball_grid(points, radius):
         span = (p[finite].max(axis=0) - lo) / cell
         if not np.all(span < 2.0 ** 60):
             return None
+        dims = np.floor(span).astype(np.int64) + 2
+        if float(np.prod(dims.astype(np.float64))) <= _DENSE_CELLS_PER_POINT * len(finite) + 2 ** 20:
+            order, sorted_points, cell_start = kernels.cell_grid_build(
+                p, finite.astype(np.int64), lo, cell, dims)
+            return BallGrid(p, radius, lo, cell, order, cell_start, dims, sorted_points)
     else:
         lo = np.zeros(3)
-    grid = kernels.grid_build(p, finite.astype(np.int64), lo, cell)
-    return BallGrid(p, radius, lo, cell, *grid)
+    order, cell_start, keys, cells = kernels.grid_build(p, finite.astype(np.int64), lo, cell)
+    return BallGrid(p, radius, lo, cell, order, cell_start, table_keys=keys, table_cells=cells)
 
 
-def ball_neighbors(tree, finite_index, query_points, radius):
+def ball_neighbors(tree, finite_index, query_points, radius, ascending=True):
     """All points within ``radius`` of each query point (the query point itself included).
 
     Parameters
@@ -132,6 +149,9 @@ def ball_neighbors(tree, finite_index, query_points, radius):
     finite_index : (k,) int64, the vertex index of each point in the tree
     query_points : (m, 3) float64 (rows with NaN get no neighbours)
     radius : float, model units
+    ascending : bool, default True
+        Sort each list. False leaves a dense grid's lists in grid order (about twice as fast;
+        for consumers that do not depend on the order, like the curvature kernel).
 
     Returns
     -------
@@ -142,6 +162,10 @@ def ball_neighbors(tree, finite_index, query_points, radius):
         if float(radius) != tree.radius:
             raise ValueError(f"the grid was built for radius {tree.radius}, not {radius}")
         q = np.ascontiguousarray(query_points, dtype=np.float64)
+        if tree.dims is not None:
+            return kernels.cell_ball_csr(tree.order, tree.sorted_points, tree.cell_start,
+                                         tree.origin, tree.cell, tree.dims, q, tree.radius,
+                                         numba.get_num_threads(), bool(ascending))
         return kernels.grid_ball_csr(tree.points, tree.order, tree.cell_start, tree.table_keys,
                                      tree.table_cells, tree.origin, tree.cell, q, tree.radius,
                                      numba.get_num_threads())

@@ -5,8 +5,6 @@ so point-cloud normals are oriented consistently before any curvature is compute
 """
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import breadth_first_order, connected_components, minimum_spanning_tree
 from scipy.spatial import cKDTree
 
 from . import kernels
@@ -80,18 +78,23 @@ def orient_towards(normals, points, viewpoint):
     return normals
 
 
-def orient_mst(points, normals, k=10):
+def orient_mst(points, normals, k=10, neighbors=None):
     """Consistent orientation by propagation over a minimum spanning tree, then outward.
 
     The k-nearest-neighbour graph is weighted by ``1 - |n_i . n_j|`` (Hoppe et al. 1992), so the
-    tree propagates signs along smooth paths first. Each connected piece is then flipped as a
-    whole so that its normals point away from its centroid on average - outward for a closed
-    surface, away from the concave side for an open one.
+    tree propagates signs along smooth paths first (weights rounded to 4096 steps of
+    ``sqrt(w)``, see :func:`meshcurv.kernels.orient_spanning_tree`). Each connected piece is
+    then flipped as a whole so that its normals point away from its centroid on average -
+    outward for a closed surface, away from the concave side for an open one.
 
     Parameters
     ----------
     points : (n, 3) float64; normals : (n, 3) float64 unit, NaN rows are left alone
-    k : int, neighbours per point in the graph
+    k : int, neighbours per point in the graph (when ``neighbors`` is not given)
+    neighbors : (n, j) int64, optional
+        The graph, e.g. from :func:`meshcurv.kernels.nearest_in_lists` over lists already at
+        hand: row i lists point indices joined to i, -1 for none. Default: the k nearest
+        neighbours from a k-d tree.
 
     Returns
     -------
@@ -101,31 +104,44 @@ def orient_mst(points, normals, k=10):
     if len(ok) == 0:
         return normals
     p = points[ok]
-    nv = normals[ok].copy()
-    kk = min(k, len(ok) - 1)
-    if kk >= 1:
-        dist, nb = cKDTree(p).query(p, k=kk + 1, workers=-1)
-        rows = np.repeat(np.arange(len(ok)), kk)
-        cols = nb[:, 1:].ravel()
-        keep = np.isfinite(dist[:, 1:].ravel())
-        rows, cols = rows[keep], cols[keep]
-        # small floor: scipy treats explicit zero weights as missing edges
-        w = 1.0 - np.abs(np.einsum("ij,ij->i", nv[rows], nv[cols])) + 1e-9
-        graph = coo_matrix((w, (rows, cols)), shape=(len(ok), len(ok))).tocsr()
-        tree = minimum_spanning_tree(graph)
-        tree = tree + tree.T
-        n_comp, labels = connected_components(tree, directed=False)
+    nv = np.ascontiguousarray(normals[ok])
+    if neighbors is None:
+        kk = min(k, len(ok) - 1)
+        if kk >= 1:
+            dist, nb = cKDTree(p).query(p, k=kk + 1, workers=-1)
+            nb = np.where(np.isfinite(dist[:, 1:]), nb[:, 1:], -1).astype(np.int64)
+        else:
+            nb = np.full((len(ok), 1), -1, dtype=np.int64)
     else:
-        n_comp, labels = 1, np.zeros(len(ok), dtype=np.int64)
-    roots, sizes = np.unique(labels, return_index=True, return_counts=True)[1:]
-    for root in roots[sizes > 1]:
-        order, pred = breadth_first_order(tree, root, directed=False, return_predecessors=True)
-        kernels.propagate_signs(order, pred, nv)
+        # renumber the graph to the rows kept
+        local = np.full(len(points) + 1, -1, dtype=np.int64)
+        local[ok] = np.arange(len(ok))
+        nb = local[np.asarray(neighbors, dtype=np.int64)[ok]]
+    # traverse in a spatially coherent order (points sorted by grid cell): the tree's random
+    # accesses then stay in cache
+    span = np.maximum(np.ptp(p, axis=0), 1e-300)
+    s1, s2, s3 = np.sort(span)[::-1]
+    # about one point per cell for volumes, a few per occupied cell for surfaces
+    cell = max(2.0 * np.sqrt(s1 * s2 / len(p)), np.cbrt(s1 * s2 * s3 / len(p)), 1e-300)
+    dims = np.floor(span / cell).astype(np.int64) + 3
+    order = kernels.cell_grid_build(p, np.arange(len(p)), p.min(axis=0) - cell, cell, dims)[0]
+    rank = np.empty(len(p) + 1, dtype=np.int64)
+    rank[order] = np.arange(len(p))
+    rank[-1] = -1
+    nv_sorted = np.ascontiguousarray(nv[order])
+    labels = kernels.orient_spanning_tree(nv_sorted, np.ascontiguousarray(rank[nb[order]]), 4096)
+    nv[order] = nv_sorted
+    labels = order[labels]
+    labels_sorted_to_input = np.empty_like(labels)
+    labels_sorted_to_input[order] = labels
+    labels = labels_sorted_to_input
     # one global decision per connected piece: point away from its centroid
-    sums = np.zeros((n_comp, 3))
-    np.add.at(sums, labels, p)
-    centroid = sums / np.bincount(labels, minlength=n_comp)[:, None]
-    score = np.bincount(labels, weights=np.einsum("ij,ij->i", p - centroid[labels], nv), minlength=n_comp)
+    n_comp = len(ok)                       # labels are root rows: bins 0..len(ok) - 1
+    size = np.maximum(np.bincount(labels, minlength=n_comp), 1)
+    centroid = np.column_stack([np.bincount(labels, weights=p[:, c], minlength=n_comp)
+                                for c in range(3)]) / size[:, None]
+    score = np.bincount(labels, weights=np.einsum("ij,ij->i", p - centroid[labels], nv),
+                        minlength=n_comp)
     nv[score[labels] < 0] *= -1.0
     normals[ok] = nv
     return normals

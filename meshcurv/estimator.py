@@ -10,12 +10,39 @@ from tqdm.auto import tqdm
 
 from . import kernels, normals as nrm, shape
 from .neighborhoods import (KringWork, ball_grid, ball_neighbors, default_radius,
-                            edge_adjacency, kring_neighbors)
+                            edge_adjacency, kring_neighbors, spatial_order)
 
 __all__ = ["CurvatureResult", "principal_curvatures"]
 
 # Query points per call into the kernels: bounds the memory of the neighbour lists.
 _BLOCK = 65536
+
+# Noise level (RMS height residual of the local cubic fit, as a fraction of the radius) at
+# which weighting="auto" mixes equal and distance weights half and half. Measured: clean
+# samples of the test surfaces stay below 0.09 % of the radius (Table 2 paraboloid 0.02 %,
+# torus 0.08 %), normal noise of 0.03 % of the bounding-box diagonal already gives 0.6-0.9 %,
+# and from there on equal weights are the more accurate.
+NOISE_SCALE = 2e-3
+
+
+def weight_blend(noise, radius, weighting="auto"):
+    """Per-vertex mix of the circle fits' weight functions, in [0, 1] (1 = distance weights).
+
+    "auto": ``1 / (1 + (noise / (NOISE_SCALE * radius))^2)``, i.e. distance weights where the
+    local cubic fit explains the points (clean data: less bias), equal weights where it leaves
+    noise (less variance); NaN noise (too few points for the fit) gives equal weights.
+    """
+    noise = np.asarray(noise, dtype=np.float64)
+    if weighting == "distance":
+        return np.ones_like(noise)
+    if weighting == "none":
+        return np.zeros_like(noise)
+    with np.errstate(invalid="ignore"):
+        beta = 1.0 / (1.0 + (noise / (NOISE_SCALE * radius)) ** 2)
+    return np.where(np.isfinite(beta), beta, 0.0)
+
+# Neighbours per point in the graph of the spanning-tree orientation.
+_TREE_NEIGHBOURS = 10
 
 
 @dataclass
@@ -32,8 +59,8 @@ class CurvatureResult:
     n_neighbors : (n,) int, neighbours within the radius
     n_samples : (n,) int, circle fits used in the Euler fit (at most ``2 * n_directions``)
     residual : (n,) float64, RMS residual of the Euler fit, 1 / model units
-    noise : (n,) float64, RMS height residual of the circle fits, model units (an estimate of
-        the noise along the normal)
+    noise : (n,) float64, RMS height residual of a local cubic fit over the neighbourhood,
+        model units: an estimate of the noise along the normal (NaN with fewer than 11 points)
     radius : float, the neighbourhood radius used, model units
     """
 
@@ -106,7 +133,7 @@ def _as_arrays(vertices, faces, normals):
 
 
 def _blocks(query, progress, desc):
-    """Split query indices into blocks, with a progress bar when asked."""
+    """Split an index array into blocks of ``_BLOCK``, with a progress bar when asked."""
     starts = range(0, len(query), _BLOCK)
     bar = tqdm(total=len(query), desc=desc, unit="pt", disable=not progress, leave=False)
     for s in starts:
@@ -117,7 +144,7 @@ def _blocks(query, progress, desc):
 
 def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_directions=8,
                          neighborhood="auto", *, slab=0.25, min_points=3, min_spread=0.25,
-                         weighting="distance", circle_normalization="tangent",
+                         weighting="auto", circle_normalization="tangent",
                          section_blend=True, robust=True,
                          half_frequency=False, normal_estimation="auto", refine_normals=None,
                          orientation="mst",
@@ -158,12 +185,13 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
     min_spread : float, default 0.25
         Fewest fraction of ``radius`` the farthest point of a half-set must reach along its
         direction; rejects one-sided stubs near borders and holes.
-    weighting : {"distance", "none"}
-        Weights of the points in each circle fit. "distance" (default):
-        ``(1 - r^2 / radius^2)^4``, which favours near points: on the Table 2 paraboloid
-        (radius 2) it halves the error of equal weights (mean |dk1| 0.0015 vs 0.0030), because
-        the curvature varies inside the ball. "none": equal weights; about half the noise-induced
-        error, the better choice on noisy scans at a given radius.
+    weighting : {"auto", "distance", "none"}
+        Weights of the points in each circle fit. "distance": ``(1 - r^2 / radius^2)^4``,
+        which favours near points: where the curvature varies inside the ball it halves the
+        error of equal weights (Table 2 paraboloid, radius 2: mean |dk1| 0.0015 vs 0.0030).
+        "none": equal weights, about a third of the noise-induced error. "auto" (default): per
+        vertex, distance weights where the local cubic fit leaves no noise and equal weights
+        where it does, mixed smoothly (:func:`weight_blend`).
     circle_normalization : {"tangent", "unit"}
         Normalisation of the CGA sphere vector t in each circle fit. "unit": |t| = 1, the
         smallest eigenvector of the 3x3 matrix (the paper). "tangent" (default): t1 = 1, the
@@ -183,10 +211,10 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
         the least-squares plane through the same neighbourhood, oriented by the faces if there
         are any, else by ``orientation``. "auto": "faces" for meshes, "pca" for point clouds.
     refine_normals : bool or None, default None
-        Refine the normals by a local quadric fit over the same neighbourhood before the
-        circle fits (:func:`meshcurv.kernels.refine_normals_quadric`). Face and PCA normals
-        tilt with irregular sampling (0.7 degrees on a random sphere), which costs up to 3 %
-        in curvature; the quadric's normal does not. None: refine estimated normals, use given
+        Refine the normals by a local cubic fit over the same neighbourhood before the
+        circle fits (:func:`meshcurv.kernels.local_jet`). Face and PCA normals tilt with
+        irregular sampling (0.7 degrees on a random sphere), which costs up to 3 % in
+        curvature; the fitted surface's normal does not. None: refine estimated normals, use given
         ones as they are; True: refine given normals too; False: never.
     orientation : "mst" or (3,) array-like
         Global orientation of estimated point-cloud normals: "mst" propagates along a minimum
@@ -229,8 +257,8 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
             raise ValueError("orientation must be 'mst' or a (3,) viewpoint")
     if neighborhood == "kring" and f is None:
         raise ValueError("neighborhood='kring' needs faces")
-    if weighting not in ("distance", "none"):
-        raise ValueError(f"weighting must be 'distance' or 'none', got {weighting!r}")
+    if weighting not in ("auto", "distance", "none"):
+        raise ValueError(f"weighting must be 'auto', 'distance' or 'none', got {weighting!r}")
     if circle_normalization not in ("tangent", "unit"):
         raise ValueError(f"circle_normalization must be 'tangent' or 'unit', got {circle_normalization!r}")
     if int(n_directions) < 3:
@@ -258,7 +286,8 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
         def neighbours(idx):
             return kring_neighbors(v, adjacency, radius, idx, work)
     else:
-        # a uniform grid when one fits (same lists as the k-d tree, several times faster)
+        # a uniform grid when one fits (same lists as the k-d tree, several times faster); the
+        # kernels do not depend on the order within a list, so it is left unsorted
         tree = ball_grid(v, radius) if len(finite) else None
         if tree is None and len(finite):
             tree = cKDTree(v[finite])
@@ -266,62 +295,89 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
         def neighbours(idx):
             if tree is None:
                 return np.zeros(len(idx) + 1, dtype=np.int64), np.zeros(0, dtype=np.int64)
-            return ball_neighbors(tree, finite, v[idx], radius)
+            return ball_neighbors(tree, finite, v[idx], radius, ascending=False)
 
-    # 2. normals (and, inside the kernel, the tangent frame)
+    # 2. normals: given, from the faces, or a PCA plane fit over each block's neighbourhood
+    # (oriented by the faces or towards the viewpoint block by block; along a spanning tree in
+    # a first pass of its own, as the tree needs every normal)
     method = normal_estimation
     if method == "auto":
         method = "faces" if f is not None else "pca"
+    if method == "faces" and given_normals is None and f is None:
+        raise ValueError("normal_estimation='faces' needs faces")
+    estimate = given_normals is None and method == "pca"
+    viewpoint = None if isinstance(orientation, str) else orientation
+    tree_orient = estimate and f is None and viewpoint is None
+    face_normals = None
     if given_normals is not None:
-        nv = given_normals.copy()
-    elif method == "faces":
-        if f is None:
-            raise ValueError("normal_estimation='faces' needs faces")
+        nv = given_normals
+    elif f is not None:
         with np.errstate(invalid="ignore"):       # NaN vertices give NaN normals
-            nv = nrm.face_vertex_normals(v, f)
-    else:
-        need = query if (f is not None or not isinstance(orientation, str)) else np.arange(n)
-        nv = np.full((n, 3), np.nan)
-        for idx in _blocks(need, progress, "normals"):
-            indptr, indices = neighbours(idx)
-            nv[idx] = nrm.pca_normals(v, v[idx], indptr, indices, radius)
-        if f is not None:
-            nrm.orient_like(nv, nrm.face_vertex_normals(v, f))
-        elif isinstance(orientation, str):
-            nrm.orient_mst(v, nv)
-        else:
-            nrm.orient_towards(nv, v, orientation)
+            face_normals = nrm.face_vertex_normals(v, f)
+        nv = face_normals
+    refine = given_normals is None if refine_normals is None else bool(refine_normals)
 
-    # 3-5. directional circle fits and the Euler fit, in the compiled kernel
+    def estimated_normals(idx, indptr, indices):
+        """PCA normals of a block, oriented where that needs no other block."""
+        nb = nrm.pca_normals(v, v[idx], indptr, indices, radius)
+        if face_normals is not None:
+            nrm.orient_like(nb, face_normals[idx])
+        elif viewpoint is not None:
+            nrm.orient_towards(nb, v[idx], viewpoint)
+        return nb
+
+    if tree_orient:
+        # the tree's graph: each point's nearest neighbours, taken from the lists at hand
+        nv = np.full((n, 3), np.nan)
+        graph = np.full((n, _TREE_NEIGHBOURS), -1, dtype=np.int64)
+        for pos in _blocks(spatial_order(v, radius), progress, "normals"):
+            indptr, indices = neighbours(pos)
+            nv[pos] = nrm.pca_normals(v, v[pos], indptr, indices, radius)
+            graph[pos] = kernels.nearest_in_lists(v, v[pos], indptr, indices, _TREE_NEIGHBOURS)
+        nrm.orient_mst(v, nv, neighbors=graph)
+        del graph
+        estimate = False
+
+    # 3-5. directional circle fits and the Euler fit, in the compiled kernel, block by block
+    # in a spatially coherent order of the queries
     m = len(query)
     k1 = np.full(m, np.nan)
     k2 = np.full(m, np.nan)
     d1 = np.full((m, 3), np.nan)
     d2 = np.full((m, 3), np.nan)
-    n_samples = np.zeros(m)
+    qn = np.full((m, 3), np.nan)
+    n_samples = np.zeros(m, dtype=np.int64)
     residual = np.full(m, np.nan)
-    n_neighbors = np.zeros(m)
+    n_neighbors = np.zeros(m, dtype=np.int64)
     noise = np.full(m, np.nan)
-    qn = nv[query]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        qn = qn / np.linalg.norm(qn, axis=1, keepdims=True)
-    refine = given_normals is None if refine_normals is None else bool(refine_normals)
-    pos = 0
-    for idx in _blocks(query, progress, "curvature"):
+    size = min(m, _BLOCK)
+    b_k1, b_k2, b_res, b_noise = (np.empty(size) for _ in range(4))
+    b_d1, b_d2 = np.empty((size, 3)), np.empty((size, 3))
+    b_samples, b_neighbours = np.empty(size), np.empty(size)
+    for pos in _blocks(spatial_order(v[query], radius), progress, "curvature"):
+        idx = query[pos]
+        b = len(idx)
         indptr, indices = neighbours(idx)
-        sl = slice(pos, pos + len(idx))
-        if refine:
-            kernels.refine_normals_quadric(v, v[idx], qn[sl], indptr, indices, radius)
+        if estimate:
+            qb = estimated_normals(idx, indptr, indices)
+        else:
+            qb = nv[idx]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            qb = qb / np.linalg.norm(qb, axis=1, keepdims=True)
+        kernels.local_jet(v, v[idx], qb, indptr, indices, radius, refine, b_noise[:b])
         kernels.curvature_cga(
-            v, v[idx], np.ascontiguousarray(qn[sl]), indptr, indices, radius, int(n_directions),
-            float(slab), float(min_points), float(min_spread), weighting == "distance",
+            v, v[idx], qb, indptr, indices, radius, int(n_directions),
+            float(slab), float(min_points), float(min_spread),
+            weight_blend(b_noise[:b], radius, weighting),
             circle_normalization == "unit", bool(section_blend), bool(half_frequency), bool(robust),
-            k1[sl], k2[sl], d1[sl], d2[sl], n_samples[sl], residual[sl], n_neighbors[sl], noise[sl])
-        pos += len(idx)
+            b_k1[:b], b_k2[:b], b_d1[:b], b_d2[:b], b_samples[:b], b_res[:b], b_neighbours[:b])
+        k1[pos], k2[pos], d1[pos], d2[pos] = b_k1[:b], b_k2[:b], b_d1[:b], b_d2[:b]
+        qn[pos], n_samples[pos], residual[pos] = qb, b_samples[:b], b_res[:b]
+        n_neighbors[pos], noise[pos] = b_neighbours[:b], b_noise[:b]
+        del indptr, indices
 
     # 6. outputs
     valid = np.isfinite(k1)
     return CurvatureResult(k1=k1, k2=k2, d1=d1, d2=d2, normals=qn, valid=valid,
-                           n_neighbors=n_neighbors.astype(np.int64),
-                           n_samples=n_samples.astype(np.int64), residual=residual, noise=noise,
-                           radius=radius)
+                           n_neighbors=n_neighbors, n_samples=n_samples, residual=residual,
+                           noise=noise, radius=radius)

@@ -1,18 +1,24 @@
-"""Automatic neighbourhood radius from the sampling density and an estimate of the noise.
+"""Automatic neighbourhood radius from the sampling density, a noise estimate and a bias probe.
 
-The circle fits average noise over the ball: a height noise sigma (along the normal) on a
-surface sampled with density rho (points per unit area) gives a curvature error of about
+The mean curvature error of the estimator at radius R is modelled as noise plus bias,
 
-    s(R) = C * sigma / (sqrt(rho) * R^3)          (C ~ 6, measured; see below)
+    E(R) = N(R) + B(R),    N(R) = C sigma / (sqrt(rho) R^3),    B(R) = beta R^2
 
-(least squares of h = kappa r^2 / 2 over ~ pi rho R^2 points spread over the disc: the variance
-of kappa is 4 sigma^2 / (N var(r^2)) with var(r^2) = R^4 / 12). A larger ball averages more
-noise away but blurs where curvature changes. :func:`auto_radius` takes the smallest radius whose
-noise error is at most ``tolerance`` times the typical curvature of the surface, never smaller
-than a ball of ``min_points`` points and never larger than ``max_angle / kappa`` (the ball must
-stay a small cap of the curvature it measures) or ``max_fraction`` of the bounding-box diagonal.
-The typical curvature comes from meshcurv itself on a sample of vertices, iterated from the
-smallest radius up (a noise-dominated estimate only makes the next radius larger).
+- N: a height noise sigma (along the normal) on a surface sampled with density rho (points per
+  unit area), averaged over the ~ pi rho R^2 points of the ball (least squares of
+  h = kappa r^2 / 2 over a disc: var(kappa) = 4 sigma^2 / (N var(r^2)), var(r^2) = R^4 / 12).
+  sigma and rho come from local quadric fits (:func:`estimate_sampling`); C was measured.
+- B: the circle model's error where curvature varies (zero on a sphere, where every normal
+  section is a circle). beta is measured on the data: the estimator runs at two radii
+  R_a < R_b on a sample of vertices; the mean change of (k1, k2) between them, less the part the
+  noise model explains (nested least-squares estimates differ by sqrt(N_a^2 - N_b^2)), is
+  beta (R_b^2 - R_a^2).
+
+:func:`auto_radius` returns the minimiser of E, R = (3 C sigma / (2 beta sqrt(rho)))^(1/5),
+never smaller than a ball of ``min_points`` points and never larger than ``max_angle / kappa``
+(the ball stays a small cap of the curvature it measures) or ``max_fraction`` of the
+bounding-box diagonal. With no measurable bias (a sphere) that upper bound is the answer; on
+clean data (sigma ~ 0) the lower one.
 
 C depends on the weights of the circle fits; measured with meshcurv (PCA normals) on unit
 icospheres of 2562 and 10242 vertices with 0.1 % and 0.3 % noise, R = 0.3 .. 0.6:
@@ -98,10 +104,11 @@ def estimate_sampling(vertices, k=24, sample=2000, seed=0):
     return density, sigma
 
 
-def auto_radius(vertices, faces=None, normals=None, *, weighting="none", tolerance=0.05,
-                min_points=40, max_angle=0.7, max_fraction=0.25, sample=2000, seed=0,
-                details=False, **settings):
-    """Neighbourhood radius for :func:`meshcurv.principal_curvatures`, from sampling and noise.
+def auto_radius(vertices, faces=None, normals=None, *, weighting="none", min_points=40,
+                max_angle=0.7, max_fraction=0.25, tolerance=0.05, probe_ratio=1.6, sample=2000,
+                seed=0, details=False, **settings):
+    """Neighbourhood radius for :func:`meshcurv.principal_curvatures` that balances noise and
+    bias (module docstring), chosen per mesh.
 
     Parameters
     ----------
@@ -111,19 +118,22 @@ def auto_radius(vertices, faces=None, normals=None, *, weighting="none", toleran
     weighting : {"none", "distance"}, default "none"
         Circle-fit weights the radius is chosen for (and used by the pilot estimates); distance
         weights need a ~1.4x larger ball for the same noise error (``NOISE_GAIN``).
-    tolerance : float, default 0.05
-        Allowed noise error of the curvature, as a fraction of the surface's typical
-        curvature (the median curvedness sqrt((k1^2 + k2^2) / 2) of a sample of vertices).
     min_points : int, default 40
-        Smallest ball, in expected points (the clean-data radius).
+        Smallest ball, in expected points.
     max_angle : float, default 0.7
-        Largest radius as a multiple of 1 / typical curvature (radians of arc on a sphere).
+        Largest radius as a multiple of 1 / kappa, kappa the median curvedness
+        sqrt((k1^2 + k2^2) / 2) of a sample of vertices (radians of arc on a sphere).
     max_fraction : float, default 0.25
         Largest radius as a fraction of the bounding-box diagonal.
+    tolerance : float, default 0.05
+        Noise error (fraction of kappa) of the smaller bias probe R_a; keeps the probe out of
+        the noise.
+    probe_ratio : float, default 1.6
+        R_b / R_a of the bias probe.
     sample : int, default 2000
         Vertices used for the noise estimate and the pilot curvature estimates.
     details : bool
-        Also return a dict with density, sigma, kappa and the radii tried.
+        Also return a dict with density, sigma, kappa, beta, the probe radii and the bounds.
     settings : keyword options passed to the pilot ``principal_curvatures`` calls
         (``normal_estimation``, ``slab``, ``n_directions``, ...; default PCA normals).
 
@@ -135,9 +145,8 @@ def auto_radius(vertices, faces=None, normals=None, *, weighting="none", toleran
     --------
     >>> from meshcurv import surfaces
     >>> s = surfaces.sphere(1.0, 4)
-    >>> r_clean = auto_radius(s.vertices, s.faces)
-    >>> r_noisy = auto_radius(surfaces.add_normal_noise(s, 0.003).vertices, s.faces)
-    >>> bool(r_noisy > 1.5 * r_clean)
+    >>> r = auto_radius(surfaces.add_normal_noise(s, 0.003).vertices, s.faces)
+    >>> bool(0.6 < r <= 0.7)      # no bias on a sphere: the largest ball, 0.7 / kappa
     True
     """
     from .estimator import principal_curvatures
@@ -148,8 +157,8 @@ def auto_radius(vertices, faces=None, normals=None, *, weighting="none", toleran
     v = np.asarray(vertices, dtype=np.float64)
     if v.ndim != 2 or v.shape[1] != 3:
         raise ValueError(f"vertices must be an (n, 3) array, got shape {v.shape}")
-    if not (0 < tolerance and 0 < max_angle and 0 < max_fraction):
-        raise ValueError("tolerance, max_angle and max_fraction must be positive")
+    if not (0 < tolerance and 0 < max_angle and 0 < max_fraction and probe_ratio > 1):
+        raise ValueError("tolerance, max_angle, max_fraction must be positive, probe_ratio > 1")
     if weighting not in NOISE_GAIN:
         raise ValueError(f"weighting must be one of {sorted(NOISE_GAIN)}, got {weighting!r}")
     gain = NOISE_GAIN[weighting]
@@ -159,12 +168,11 @@ def auto_radius(vertices, faces=None, normals=None, *, weighting="none", toleran
         from .neighborhoods import default_radius
 
         radius = default_radius(v)
-        return (radius, dict(density=np.nan, sigma=np.nan, kappa=np.nan, r_min=radius,
-                             r_max=radius, tried=[])) if details else radius
+        return (radius, dict(density=np.nan, sigma=np.nan, kappa=np.nan, beta=np.nan,
+                             r_min=radius, r_max=radius, probes=())) if details else radius
     density, sigma = estimate_sampling(v[finite], sample=sample, seed=seed)
     diag = float(np.linalg.norm(np.ptp(v[finite], axis=0)))
     r_min = np.sqrt(min_points / (np.pi * density))
-    r_max = max(r_min, max_fraction * diag)
     if faces is not None:
         used = np.unique(np.asarray(faces, dtype=np.int64).ravel())
         pool = used[finite[used]]
@@ -173,23 +181,45 @@ def auto_radius(vertices, faces=None, normals=None, *, weighting="none", toleran
     query = pool[_sample(len(pool), sample, seed + 1)]
     pilot = dict(normal_estimation="pca")
     pilot.update(settings, weighting=weighting)
-    radius, tried, kappa = r_min, [], np.nan
-    for _ in range(8):
-        res = principal_curvatures(v, faces, normals, radius=radius, query=query, **pilot)
-        kappa = float(np.nanmedian(res.curvedness)) if np.isfinite(res.k1).any() else np.nan
-        tried.append((radius, kappa))
-        if not np.isfinite(kappa) or kappa <= 0:
-            new = r_max
-        else:
-            # smallest R with NOISE_GAIN sigma / (sqrt(rho) R^3) <= tolerance kappa
-            r_noise = (gain * sigma / (tolerance * kappa * np.sqrt(density))) ** (1 / 3)
-            new = min(max(r_min, r_noise), max_angle / kappa, r_max)
-        if abs(new - radius) <= 0.02 * radius:
-            radius = new
-            break
-        radius = new
-    radius = float(radius)
+
+    def estimate(radius):
+        return principal_curvatures(v, faces, normals, radius=radius, query=query, **pilot)
+
+    def noise(radius):
+        return gain * sigma / (np.sqrt(density) * radius ** 3)
+
+    # typical curvature -> upper bound of the radius
+    kappa = float(np.nanmedian(estimate(r_min).curvedness))
+    r_max = max_fraction * diag
+    if np.isfinite(kappa) and kappa > 0:
+        r_max = min(r_max, max_angle / kappa)
+    r_max = max(r_min, r_max)
+    # bias probe at R_a (noise error ~ tolerance kappa) and R_b = probe_ratio R_a
+    r_a = r_min
+    if np.isfinite(kappa) and kappa > 0:
+        r_a = (gain * sigma / (tolerance * kappa * np.sqrt(density))) ** (1 / 3)
+    r_a = max(r_min, min(r_a, r_max / probe_ratio))
+    r_b = probe_ratio * r_a
+    a, b = estimate(r_a), estimate(r_b)
+    with np.errstate(invalid="ignore"):
+        change = float(np.nanmean(0.5 * (np.abs(a.k1 - b.k1) + np.abs(a.k2 - b.k2))))
+    # the noise part of the change of nested least-squares estimates: sqrt(N_a^2 - N_b^2)
+    bias = np.sqrt(max(change ** 2 - max(noise(r_a) ** 2 - noise(r_b) ** 2, 0.0), 0.0))
+    beta = bias / (r_b ** 2 - r_a ** 2) if np.isfinite(bias) else 0.0
+    # the larger probe averages more noise away: a better typical curvature for the bound
+    kappa_b = float(np.nanmedian(b.curvedness))
+    if np.isfinite(kappa_b) and kappa_b > 0:
+        kappa = kappa_b
+        r_max = max(r_min, min(max_fraction * diag, max_angle / kappa))
+    # d/dR (C sigma / (sqrt(rho) R^3) + beta R^2) = 0
+    if beta > 0 and sigma > 0:
+        radius = (3 * gain * sigma / (2 * beta * np.sqrt(density))) ** 0.2
+    elif beta > 0:
+        radius = r_min
+    else:
+        radius = r_max
+    radius = float(min(max(radius, r_min), r_max))
     if details:
-        return radius, dict(density=density, sigma=sigma, kappa=kappa, r_min=r_min, r_max=r_max,
-                            tried=tried)
+        return radius, dict(density=density, sigma=sigma, kappa=kappa, beta=beta, r_min=r_min,
+                            r_max=r_max, probes=(r_a, r_b), change=change)
     return radius

@@ -246,11 +246,25 @@ class _TaskMemory:
         return False
 
 
-def _set_threads(threads):
-    if threads:
-        import numba
+def _prepare_worker(threads):
+    """Numba threads for this task; the first time in a process, load the compiled kernels
+    (from numba's cache) on a tiny cloud, so that a tile task's memory is the tile's alone."""
+    import numba
 
+    from .estimator import principal_curvatures
+
+    if threads:
         numba.set_num_threads(min(int(threads), numba.config.NUMBA_NUM_THREADS))
+    global _WORKER_READY
+    if not _WORKER_READY:
+        g = np.stack(np.meshgrid(np.arange(4.0), np.arange(4.0), indexing="ij"), -1).reshape(-1, 2)
+        pts = np.column_stack([g, 0.1 * (g ** 2).sum(axis=1)])
+        _tile_normals(pts, 1.5)
+        principal_curvatures(pts, radius=1.5, orientation=(1.0, 1.0, 10.0), query=[5])
+        _WORKER_READY = True
+
+
+_WORKER_READY = False
 
 
 # ----------------------------------------------------------------------------- stage 1: scatter
@@ -356,7 +370,7 @@ def _normals_task(name, work, chunk_ids, radius, grid, in_path, threads=None,
     """
     t0 = time.perf_counter()
     try:
-        _set_threads(threads)
+        _prepare_worker(threads)
         with _TaskMemory(measure_memory) as mem:
             idx, xyz, own, _, _ = _load_tile(work, name, chunk_ids)
             nv = _tile_normals(xyz, radius)
@@ -472,7 +486,7 @@ def _curvature_task(name, work, chunk_ids, radius, orientation, options, in_path
     """
     t0 = time.perf_counter()
     try:
-        _set_threads(threads)
+        _prepare_worker(threads)
         with _TaskMemory(measure_memory) as mem:
             idx, xyz, own, normals, chunk_of = _load_tile(work, name, chunk_ids)
             if flip is not None:

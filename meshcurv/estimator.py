@@ -38,7 +38,7 @@ def weight_blend(noise, radius, weighting="auto"):
     if weighting == "none":
         return np.zeros_like(noise)
     with np.errstate(invalid="ignore"):
-        beta = 1.0 / (1.0 + (noise / (NOISE_SCALE * radius)) ** 2)
+        beta = 1.0 / (1.0 + (noise / (NOISE_SCALE * radius)) ** 4)
     return np.where(np.isfinite(beta), beta, 0.0)
 
 # Neighbours per point in the graph of the spanning-tree orientation.

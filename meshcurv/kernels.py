@@ -278,19 +278,20 @@ def _model(rows, s, npar, sol):
 
 @njit(cache=True)
 def _estimate_one(points, nbr, lo, hi, x, n, radius, ndir, slab, min_points, min_spread,
-                  weighted, unit_norm, corrected, half_frequency, robust,
+                  beta, unit_norm, corrected, half_frequency, robust,
                   ca, sa, acc, kappa, rows, active, scratch, mat, rhs, sol, ev, tu, tv, res):
     """Circle fits in 2*ndir half-sets around one point, then the Euler model fit.
 
-    Writes (k1, k2, theta1, n_used_samples, residual_rms, n_neighbours, noise) into ``res`` and
-    the frame into tu, tv. Lengths inside are in units of ``radius``; ``weighted`` selects the
-    distance weights (1 - r^2)^WEIGHT_POWER instead of equal weights.
+    Writes (k1, k2, theta1, n_used_samples, residual_rms, n_neighbours) into ``res`` and the
+    frame into tu, tv. Lengths inside are in units of ``radius``. The points' weights are
+    ``(1 - beta) + beta (1 - r^2)^WEIGHT_POWER``: equal weights at beta = 0, distance weights
+    at beta = 1.
     """
     nh = 2 * ndir
     for k in range(nh):
         for c in range(N_ACC):
             acc[k, c] = 0.0
-    for a in range(7):
+    for a in range(6):
         res[a] = np.nan
     res[3] = 0.0
     res[5] = 0.0
@@ -317,7 +318,7 @@ def _estimate_one(points, nbr, lo, hi, x, n, radius, ndir, slab, min_points, min
         t2 = u * u + v * v
         if t2 <= 0.0:
             continue
-        w = (1.0 - r2) ** WEIGHT_POWER if weighted else 1.0
+        w = (1.0 - beta) + beta * (1.0 - r2) ** WEIGHT_POWER
         c2 = (u * u - v * v) / t2
         s2 = 2.0 * u * v / t2
         wr = w * r2
@@ -345,8 +346,6 @@ def _estimate_one(points, nbr, lo, hi, x, n, radius, ndir, slab, min_points, min
     # circle fits per half-set; x itself is the row (0, -1, 0) with weight 1
     m = 0
     planes_seen = 0
-    noise_ss = 0.0
-    noise_dof = 0.0
     for i in range(ndir):
         seen = False
         for side in range(2):
@@ -354,7 +353,7 @@ def _estimate_one(points, nbr, lo, hi, x, n, radius, ndir, slab, min_points, min
             if acc[k, _CNT] < min_points or acc[k, _EMAX] < min_spread:
                 continue
             acc[k, _N] += 1.0
-            kap, ss = _circle_fit(acc, k, unit_norm, ev)
+            kap, _ = _circle_fit(acc, k, unit_norm, ev)
             if not np.isfinite(kap):
                 continue
             theta = math.atan2(sa[i], ca[i]) + side * math.pi
@@ -366,11 +365,6 @@ def _estimate_one(points, nbr, lo, hi, x, n, radius, ndir, slab, min_points, min
             rows[m, 3] = math.cos(theta)
             rows[m, 4] = math.sin(theta)
             active[m] = 1.0
-            # height noise: weighted residual per unit weight, 3 parameters per circle
-            cnt = acc[k, _CNT] + 1.0
-            if cnt > 3.0:
-                noise_ss += ss / acc[k, _N] * cnt
-                noise_dof += cnt - 3.0
             m += 1
             seen = True
         if seen:
@@ -412,13 +406,12 @@ def _estimate_one(points, nbr, lo, hi, x, n, radius, ndir, slab, min_points, min
     res[2] = 0.5 * math.atan2(sol[2], sol[1])
     res[3] = used
     res[4] = math.sqrt(sse / used) * inv_r
-    res[6] = math.sqrt(noise_ss / noise_dof) * radius if noise_dof > 0.0 else np.nan
 
 
 @njit(parallel=True, cache=True)
 def curvature_cga(points, query_points, query_normals, indptr, indices, radius, ndir, slab,
-                  min_points, min_spread, weighted, unit_norm, corrected, half_frequency,
-                  robust, k1, k2, d1, d2, n_samples, residual, n_neighbors, noise):
+                  min_points, min_spread, blend, unit_norm, corrected, half_frequency,
+                  robust, k1, k2, d1, d2, n_samples, residual, n_neighbors):
     """Fused CGA circle-fit estimator over query points with CSR neighbour lists.
 
     Parameters
@@ -429,11 +422,12 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
         ``indices[indptr[q]:indptr[q+1]]`` (the query point itself may be present; coincident
         points are skipped)
     radius : float, model units; slab, min_spread : fractions of ``radius``
-    weighted : bool, distance weights (1 - r^2 / radius^2)^WEIGHT_POWER, else equal weights
+    blend : (m,) float64 in [0, 1], per query point: 0 equal weights, 1 distance weights
+        (1 - r^2 / radius^2)^WEIGHT_POWER, between the two a mix of both weight functions
     unit_norm : bool, circle fits normalised by |t| = 1 (the paper) instead of t1 = 1
     corrected, half_frequency, robust : bool, see :func:`meshcurv.principal_curvatures`
-    Outputs k1, k2 (m,), d1, d2 (m, 3), n_samples, residual, n_neighbors, noise (m,) are written
-    in place; NaN where no estimate is possible.
+    Outputs k1, k2 (m,), d1, d2 (m, 3), n_samples, residual, n_neighbors (m,) are written in
+    place; NaN where no estimate is possible.
     """
     m = query_points.shape[0]
     nh = 2 * ndir
@@ -457,7 +451,7 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
         ev = np.empty(3)
         tu = np.empty(3)
         tv = np.empty(3)
-        res = np.empty(7)
+        res = np.empty(6)
         x = np.empty(3)
         n = np.empty(3)
         for q in range(c * CHUNK, min(m, (c + 1) * CHUNK)):
@@ -469,18 +463,17 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
                 for a in range(3):
                     n[a] /= nn
                 _estimate_one(points, indices, indptr[q], indptr[q + 1], x, n, radius, ndir,
-                              slab, min_points, min_spread, weighted, unit_norm, corrected,
+                              slab, min_points, min_spread, blend[q], unit_norm, corrected,
                               half_frequency, robust, ca, sa, acc, kappa, rows, active, scratch,
                               mat, rhs, sol, ev, tu, tv, res)
             else:
-                for a in range(7):
+                for a in range(6):
                     res[a] = np.nan
                 res[3] = 0.0
                 res[5] = 0.0
             n_samples[q] = res[3]
             residual[q] = res[4]
             n_neighbors[q] = res[5]
-            noise[q] = res[6]
             if np.isfinite(res[0]):
                 k1[q] = res[0]
                 k2[q] = res[1]
@@ -500,34 +493,42 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
 
 
 @njit(parallel=True, cache=True)
-def refine_normals_quadric(points, query_points, normals, indptr, indices, radius):
-    """Refine unit normals in place by a local quadric fit (a second-order jet).
+def local_jet(points, query_points, normals, indptr, indices, radius, refine, noise):
+    """Local height fits around each query point: noise level (cubic) and normal (quadric).
 
     In a frame (tu, tv, n) around each query point x, the heights of its neighbours within
-    ``radius`` are fitted by ``h = a u^2 + b uv + c v^2 + d u + e v + f`` (least squares with
-    weights ``1 - r^2 / radius^2``, x included); the normal of that surface at x,
-    ``n - d tu - e tv`` normalised, replaces n. Face and PCA normals tilt by the sampling's
-    irregularity (0.7 degrees on a randomly sampled sphere at ~100 neighbours); the quadric's
-    gradient does not, to second order. The result stays on n's side (same orientation).
-    Normals whose fit is singular (fewer than 6 well-spread points) or would tilt by more than
-    30 degrees (the neighbourhood is no graph over n, e.g. at a crease) are left unchanged.
+    ``radius`` are fitted by polynomials in (u, v) (least squares with weights
+    ``1 - r^2 / radius^2``, x included). The cubic fit's residual (10 coefficients) is what the
+    surface's shape up to third order cannot explain: on clean samples of smooth surfaces it
+    is below 0.1 % of the radius, with noise it is the noise. With ``refine`` the normal of the
+    fitted quadric (6 coefficients; the cubic's gradient at x has 3-5x its variance under
+    noise) at x, ``n - g_u tu - g_v tv`` normalised, replaces n: face and PCA normals tilt with
+    irregular sampling (0.7 degrees on a randomly sampled sphere at ~100 neighbours), the
+    quadric's normal does not. The refined normal stays on n's side.
 
     Parameters
     ----------
-    points : (n, 3) float64; query_points : (m, 3) float64; normals : (m, 3) float64, unit,
-        updated in place; indptr, indices : CSR neighbour lists into ``points``;
-    radius : float, model units
+    points : (n, 3) float64; query_points : (m, 3) float64
+    normals : (m, 3) float64, unit; refined in place when ``refine``
+    indptr, indices : CSR neighbour lists into ``points``; radius : float, model units
+    refine : bool
+    noise : (m,) float64 output, RMS height residual of the cubic fit (model units, corrected
+        for the 10 fitted coefficients); NaN where the fit is singular (fewer than 11
+        well-spread points), and there the normal is left unchanged - as it is where the
+        quadric would tilt it by more than 30 degrees (no graph over n, e.g. at a crease).
     """
     m = query_points.shape[0]
     r2max = radius * radius
     inv_r = 1.0 / radius
     nchunks = (m + CHUNK - 1) // CHUNK
     for c in prange(nchunks):
-        mat = np.empty((6, 6))
-        rhs = np.empty(6)
-        sol = np.empty(6)
-        row = np.empty(6)
+        mat = np.empty((10, 10))
+        quad = np.empty((6, 6))
+        rhs = np.empty(10)
+        sol = np.empty(10)
+        row = np.empty(10)
         for q in range(c * CHUNK, min(m, (c + 1) * CHUNK)):
+            noise[q] = np.nan
             n0 = normals[q, 0]
             n1 = normals[q, 1]
             n2 = normals[q, 2]
@@ -536,7 +537,7 @@ def refine_normals_quadric(points, query_points, normals, indptr, indices, radiu
             x2 = query_points[q, 2]
             if not np.isfinite(n0 + n1 + n2 + x0 + x1 + x2):
                 continue
-            # any tangent frame: the quadric basis is closed under rotations about n
+            # any tangent frame: the polynomial basis is closed under rotations about n
             if abs(n0) < 0.9:
                 t0, t1, t2 = 0.0, -n2, n1          # e_x cross n
             else:
@@ -548,11 +549,14 @@ def refine_normals_quadric(points, query_points, normals, indptr, indices, radiu
             b0 = n1 * t2 - n2 * t1
             b1 = n2 * t0 - n0 * t2
             b2 = n0 * t1 - n1 * t0
-            for a in range(6):
+            for a in range(10):
                 rhs[a] = 0.0
-                for cc in range(6):
+                for cc in range(10):
                     mat[a, cc] = 0.0
             mat[5, 5] = 1.0          # x itself: u = v = h = 0, weight 1
+            sw = 1.0
+            swhh = 0.0
+            count = 1
             for j in range(indptr[q], indptr[q + 1]):
                 k = indices[j]
                 qx = points[k, 0] - x0
@@ -574,14 +578,31 @@ def refine_normals_quadric(points, query_points, normals, indptr, indices, radiu
                 row[3] = u
                 row[4] = v
                 row[5] = 1.0
-                for a in range(6):
+                row[6] = u * u * u
+                row[7] = u * u * v
+                row[8] = u * v * v
+                row[9] = v * v * v
+                for a in range(10):
                     rhs[a] += w * row[a] * h
                     for cc in range(a + 1):
                         mat[a, cc] += w * row[a] * row[cc]
-            if not _solve_sym(mat, rhs, 6, sol):
+                sw += w
+                swhh += w * h * h
+                count += 1
+            for a in range(6):             # the quadric's normal equations: the leading block
+                for cc in range(a + 1):
+                    quad[a, cc] = mat[a, cc]
+            if count <= 10 or not _solve_sym(mat, rhs, 10, sol):
+                continue
+            # weighted residual sum of squares of the least-squares fit: sum w h^2 - sol . rhs
+            ss = swhh
+            for a in range(10):
+                ss -= sol[a] * rhs[a]
+            noise[q] = math.sqrt(max(ss, 0.0) / sw * count / (count - 10)) * radius
+            if not refine or not _solve_sym(quad, rhs, 6, sol):
                 continue
             if sol[3] * sol[3] + sol[4] * sol[4] > 1.0 / 3.0:
-                continue             # a tilt over 30 degrees: not a graph over n; keep n
+                continue
             g0 = n0 - sol[3] * t0 - sol[4] * b0
             g1 = n1 - sol[3] * t1 - sol[4] * b1
             g2 = n2 - sol[3] * t2 - sol[4] * b2

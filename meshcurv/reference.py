@@ -11,7 +11,7 @@ from .cga import fit_normal_circle
 from .kernels import PLANE_OFFSET, WEIGHT_POWER
 from .sinefit import fit_euler
 
-__all__ = ["curvature_at_point", "quadric_normal"]
+__all__ = ["curvature_at_point", "local_jet"]
 
 
 def _tangent_u(q, n):
@@ -26,7 +26,7 @@ def _tangent_u(q, n):
 
 
 def curvature_at_point(x, n, neighbours, radius, n_directions=8, slab=0.25, min_points=3,
-                       min_spread=0.25, weighting="distance", circle_normalization="tangent",
+                       min_spread=0.25, blend=1.0, circle_normalization="tangent",
                        section_blend=True, half_frequency=False, robust=True):
     """Principal curvatures at one point from its neighbours (the kernel's contract, in numpy).
 
@@ -37,13 +37,14 @@ def curvature_at_point(x, n, neighbours, radius, n_directions=8, slab=0.25, min_
         beyond ``radius`` are ignored); the first one at least 30 degrees off the normal sets
         the tangent frame, as the lowest-index one does in the kernel
     radius : float, model units; ``slab`` and ``min_spread`` are fractions of it
+    blend : float in [0, 1], weights ``(1 - blend) + blend (1 - r^2 / radius^2)^4`` (see
+        :func:`meshcurv.estimator.weight_blend`)
     other parameters : as in :func:`meshcurv.principal_curvatures`
 
     Returns
     -------
     dict with k1, k2 (float, NaN if undefined, 1 / model units), d1 ((3,) unit), n_samples
-    (int, circle fits kept), residual (float, RMS of the Euler fit, 1 / model units) and noise
-    (float, height noise measured by the circle fits, model units)
+    (int, circle fits kept) and residual (float, RMS of the Euler fit, 1 / model units)
     """
     x = np.asarray(x, dtype=np.float64)
     n = np.asarray(n, dtype=np.float64)
@@ -59,10 +60,9 @@ def curvature_at_point(x, n, neighbours, radius, n_directions=8, slab=0.25, min_
     q, u, v = q[keep], u[keep], v[keep]
     r2 = np.einsum("ij,ij->i", q, q)
     phi = np.arctan2(v, u)
-    w = (1 - r2) ** WEIGHT_POWER if weighting == "distance" else np.ones(len(q))
+    w = (1 - blend) + blend * (1 - r2) ** WEIGHT_POWER
 
     kappas, rows, planes = [], [], set()
-    noise_ss = noise_dof = 0.0
     for i in range(n_directions):
         alpha = (i + PLANE_OFFSET) * np.pi / n_directions
         dist = -np.sin(alpha) * u + np.cos(alpha) * v    # distance to plane i (through x)
@@ -73,7 +73,7 @@ def curvature_at_point(x, n, neighbours, radius, n_directions=8, slab=0.25, min_
                 continue
             pts = np.vstack([np.zeros(3), q[half]])          # x itself is in every half-set
             wt = np.concatenate([[1.0], w[half]])
-            kappa, ss = fit_normal_circle(pts, n, wt, circle_normalization)
+            kappa, _ = fit_normal_circle(pts, n, wt, circle_normalization)
             if not np.isfinite(kappa):
                 continue
             theta = alpha + side * np.pi
@@ -89,24 +89,20 @@ def curvature_at_point(x, n, neighbours, radius, n_directions=8, slab=0.25, min_
             kappas.append(kappa)
             rows.append(row)
             planes.add(i)
-            if len(pts) > 3:     # height noise: residual per unit weight, 3 parameters a circle
-                noise_ss += ss / wt.sum() * len(pts)
-                noise_dof += len(pts) - 3
     out = dict(k1=np.nan, k2=np.nan, d1=np.full(3, np.nan), n_samples=len(kappas),
-               residual=np.nan, noise=np.nan)
+               residual=np.nan)
     if len(planes) < 3 or len(kappas) < 5:
         return out
     k1, k2, theta1, rms, used = fit_euler(np.array(rows), np.array(kappas), robust=robust)
     if not np.isfinite(k1):
         return out
     out.update(k1=k1 / radius, k2=k2 / radius, d1=np.cos(theta1) * tu + np.sin(theta1) * tv,
-               n_samples=int(used.sum()), residual=rms / radius,
-               noise=np.sqrt(noise_ss / noise_dof) * radius if noise_dof else np.nan)
+               n_samples=int(used.sum()), residual=rms / radius)
     return out
 
 
-def quadric_normal(x, n, neighbours, radius):
-    """Normal at x of the quadric height field fitted around it (the kernel's normal refinement).
+def local_jet(x, n, neighbours, radius):
+    """Cubic and quadric height fits around x (:func:`meshcurv.kernels.local_jet` in numpy).
 
     Parameters
     ----------
@@ -116,7 +112,10 @@ def quadric_normal(x, n, neighbours, radius):
 
     Returns
     -------
-    (3,) float, unit normal on n's side; n itself when the fit is singular or tilts over 30 deg
+    normal : (3,) float, unit normal of the fitted quadric at x, on n's side; n itself when a
+        fit is singular or the quadric would tilt it by more than 30 degrees
+    noise : float, RMS height residual of the cubic fit, model units, corrected for its 10
+        coefficients; NaN when the fit is singular
     """
     x = np.asarray(x, dtype=np.float64)
     n = np.asarray(n, dtype=np.float64)
@@ -126,16 +125,19 @@ def quadric_normal(x, n, neighbours, radius):
     tv = np.cross(n, tu)
     q = np.asarray(neighbours, dtype=np.float64) - x
     d2 = np.einsum("ij,ij->i", q, q)
-    q = q[(d2 > 0) & (d2 <= radius * radius)] / radius
+    q = np.vstack([np.zeros(3), q[(d2 > 0) & (d2 <= radius * radius)] / radius])  # x included
     u, v, h = q @ tu, q @ tv, q @ n
-    design = np.vstack([np.column_stack([u * u, u * v, v * v, u, v, np.ones_like(u)]),
-                        [0, 0, 0, 0, 0, 1.0]])                  # x itself, weight 1
-    w = np.concatenate([1 - np.einsum("ij,ij->i", q, q), [1.0]])
+    design = np.column_stack([u * u, u * v, v * v, u, v, np.ones_like(u),
+                              u ** 3, u * u * v, u * v * v, v ** 3])
+    w = 1 - np.einsum("ij,ij->i", q, q)
+    w[0] = 1.0
     lhs = design.T @ (w[:, None] * design)
-    if np.linalg.matrix_rank(lhs) < 6:
-        return n
-    coef = np.linalg.solve(lhs, design.T @ (w * np.concatenate([h, [0.0]])))
+    if len(q) <= 10 or np.linalg.matrix_rank(lhs) < 10:
+        return n, np.nan
+    coef = np.linalg.solve(lhs, design.T @ (w * h))
+    noise = np.sqrt(np.sum(w * (h - design @ coef) ** 2) / w.sum() * len(q) / (len(q) - 10))
+    coef = np.linalg.solve(lhs[:6, :6], design[:, :6].T @ (w * h))   # the quadric
     if coef[3] ** 2 + coef[4] ** 2 > 1 / 3:
-        return n
+        return n, noise * radius
     g = n - coef[3] * tu - coef[4] * tv
-    return g / np.linalg.norm(g)
+    return g / np.linalg.norm(g), noise * radius

@@ -46,8 +46,8 @@ def sorted_ball_csr(points, radius):
 
 @pytest.mark.parametrize("options", [
     dict(),
-    dict(weighting="none"),
-    dict(circle_normalization="unit"),
+    dict(blend=0.0),
+    dict(blend=0.37, circle_normalization="unit"),
     dict(section_blend=False, robust=False),
     dict(half_frequency=True, n_directions=6, slab=0.4),
 ])
@@ -60,19 +60,18 @@ def test_kernel_matches_numpy_reference(options):
     indptr, indices = sorted_ball_csr(v, radius)
     m = len(v)
     out = dict(k1=np.empty(m), k2=np.empty(m), d1=np.empty((m, 3)), d2=np.empty((m, 3)),
-               n_samples=np.empty(m), residual=np.empty(m), n_neighbors=np.empty(m),
-               noise=np.empty(m))
-    opt = dict(n_directions=8, slab=0.25, weighting="distance", circle_normalization="tangent",
+               n_samples=np.empty(m), residual=np.empty(m), n_neighbors=np.empty(m))
+    opt = dict(n_directions=8, slab=0.25, blend=1.0, circle_normalization="tangent",
                section_blend=True, half_frequency=False, robust=True) | options
     kernels.curvature_cga(v, v, s.normals, indptr, indices, radius, opt["n_directions"],
-                          opt["slab"], 3.0, 0.25, opt["weighting"] == "distance",
+                          opt["slab"], 3.0, 0.25, np.full(m, opt["blend"]),
                           opt["circle_normalization"] == "unit", opt["section_blend"],
                           opt["half_frequency"], opt["robust"], *out.values())
     checked = 0
     for i in range(0, m, 7):
         ref = reference.curvature_at_point(v[i], s.normals[i], v[indices[indptr[i]:indptr[i + 1]]],
                                            radius, **opt)
-        for key in ("k1", "k2", "residual", "noise"):
+        for key in ("k1", "k2", "residual"):
             assert out[key][i] == pytest.approx(ref[key], rel=1e-9, abs=1e-9, nan_ok=True), key
         assert out["n_samples"][i] == ref["n_samples"]
         if np.isfinite(ref["k1"]):
@@ -81,22 +80,46 @@ def test_kernel_matches_numpy_reference(options):
     assert checked > 100
 
 
-def test_normal_refinement_matches_numpy_reference():
+def test_local_jet_matches_numpy_reference():
+    """Cubic fit: normals and noise as the reference; 3-degree normal errors come down to the
+    noise level, and the noise estimate finds the noise that was added."""
     rng = np.random.default_rng(2)
     s = surfaces.torus(n_major=100, n_minor=30)
-    v = s.vertices + rng.normal(scale=0.005, size=s.vertices.shape)
+    sigma = 0.005
+    v = s.vertices + rng.normal(scale=sigma, size=(len(s.vertices), 1)) * s.normals
     radius = 0.3
     indptr, indices = sorted_ball_csr(v, radius)
     start = s.normals + rng.normal(scale=0.05, size=v.shape)
     start /= np.linalg.norm(start, axis=1, keepdims=True)
     refined = start.copy()
-    kernels.refine_normals_quadric(v, v, refined, indptr, indices, radius)
+    noise = np.empty(len(v))
+    kernels.local_jet(v, v, refined, indptr, indices, radius, True, noise)
     for i in range(0, len(v), 13):
-        ref = reference.quadric_normal(v[i], start[i], v[indices[indptr[i]:indptr[i + 1]]], radius)
-        np.testing.assert_allclose(refined[i], ref, atol=1e-9)
-    # and it brings 3-degree normal errors down to the noise level
+        normal, nz = reference.local_jet(v[i], start[i], v[indices[indptr[i]:indptr[i + 1]]], radius)
+        np.testing.assert_allclose(refined[i], normal, atol=1e-9)
+        assert noise[i] == pytest.approx(nz, rel=1e-9)
     err = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", refined, s.normals), -1, 1)))
     assert err.mean() < 1.0
+    # the RMS of the added N(0, sigma) heights, up to the fit's and the weights' small effects
+    assert np.median(noise) == pytest.approx(sigma, rel=0.15)
+
+
+def test_auto_weighting_follows_the_noise():
+    """weighting="auto" is close to distance weights on clean data and to equal weights on
+    noisy data, where the two differ by 2-3x."""
+    s = surfaces.sphere(sampling="random", n=20000, seed=5)
+    t = surfaces.torus()
+    for surf, radius, sigma, best in ((t, 0.25, 0.0, "distance"), (s, 0.2, 0.0003, "none"),
+                                      (t, 0.25, 0.0003, "none")):
+        data = surfaces.add_normal_noise(surf, sigma) if sigma else surf
+        err = {}
+        for w in ("auto", "none", "distance"):
+            r = meshcurv.principal_curvatures(data.vertices, data.faces, radius=radius, weighting=w)
+            err[w] = np.mean(np.abs(r.k1 - surf.k1) + np.abs(r.k2 - surf.k2))
+        other = "none" if best == "distance" else "distance"
+        assert err[best] < 0.7 * err[other], err
+        # clean torus: auto keeps part of the gain (measured 0.0089 vs 0.0065 / 0.0158)
+        assert err["auto"] <= (1.5 if best == "distance" else 1.1) * err[best], err
 
 
 # ---------------------------------------------------------------- Table 2 of the paper
@@ -222,7 +245,8 @@ def test_thin_sheet_kring_does_not_leak():
     ball = meshcurv.principal_curvatures(v, f, radius=radius, neighborhood="ball")
     assert np.nanmax(np.abs(kring.k1[flat])) < 1e-6
     assert np.nanmax(np.abs(kring.k2[flat])) < 1e-6
-    assert np.nanmean(np.abs(ball.k1[flat]) + np.abs(ball.k2[flat])) > 0.1
+    # the ball mixes in the other side, 0.02 away: a flat plate reads as curved
+    assert np.nanmean(np.abs(ball.k1[flat]) + np.abs(ball.k2[flat])) > 0.01
 
 
 # ---------------------------------------------------------------- bad input

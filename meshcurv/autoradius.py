@@ -39,7 +39,8 @@ __all__ = ["auto_radius", "estimate_sampling", "NOISE_GAIN"]
 
 # Curvature error per unit sigma / (sqrt(rho) R^3) for each circle-fit weighting, measured
 # (module docstring).
-NOISE_GAIN = {"none": 5.6, "distance": 15.5}
+# "auto" weighting turns to equal weights where the data are noisy, so it has their gain.
+NOISE_GAIN = {"none": 5.6, "distance": 15.5, "auto": 5.6}
 
 
 def _sample(n, size, seed):
@@ -115,7 +116,7 @@ def auto_radius(vertices, faces=None, normals=None, *, weighting="none", min_poi
     vertices : (n, 3) float or trimesh.Trimesh, model units
     faces : (m, 3) int, optional (used for the pilot estimates, as the estimator would)
     normals : (n, 3) float, optional, outward normals passed to the pilot estimates
-    weighting : {"none", "distance"}, default "none"
+    weighting : {"none", "distance", "auto"}, default "none"
         Circle-fit weights the radius is chosen for (and used by the pilot estimates); distance
         weights need a ~1.4x larger ball for the same noise error (``NOISE_GAIN``).
     min_points : int, default 40

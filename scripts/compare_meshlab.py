@@ -527,6 +527,18 @@ def _view(ax, v, f, values, title, vmin=-1.0, vmax=1.0, cmap="jet", elev=25, azi
     ax.set_title(title, fontsize=9, y=0.95)
 
 
+def save_png(fig, path, dpi=90):
+    """Save a figure as a 256-colour PNG (the shaded meshes stay well under 300 kB)."""
+    import io
+
+    from PIL import Image
+
+    buf = io.BytesIO()
+    fig.savefig(buf, dpi=dpi, format="png")
+    buf.seek(0)
+    Image.open(buf).convert("RGB").quantize(256).save(path, optimize=True)
+
+
 def shape_index_picture(path, v, f, panels, suptitle, y_up=False, **view):
     """Side-by-side shape-index pictures; ``panels`` is a list of (title, k1, k2).
 
@@ -550,7 +562,7 @@ def shape_index_picture(path, v, f, panels, suptitle, y_up=False, **view):
     fig.suptitle(suptitle + "\nshape index: blue -1 cup, green 0 saddle, red +1 cap; "
                  "grey: no estimate", fontsize=9)
     fig.subplots_adjust(left=0, right=1, bottom=0, top=0.86, wspace=0)
-    fig.savefig(path, dpi=90)
+    save_png(fig, path)
     plt.close(fig)
 
 
@@ -577,7 +589,7 @@ def error_vs_noise_plot(path, rows):
     axes[0][0].set_ylabel("mean (|dk1| + |dk2|) / 2")
     axes[0][-1].legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=80)
+    save_png(fig, path, dpi=80)
     plt.close(fig)
 
 

@@ -5,6 +5,8 @@ the result back into the same mesh (same id, same vertices, same other attribute
 MeshLab's own per-vertex attribute and colour filters.
 """
 
+import warnings
+
 import numpy as np
 import pymeshlab
 
@@ -18,19 +20,29 @@ _GREY = str(shape.INVALID_COLOR[0])
 _MESHLAB_COLORMAPS = {c.lower(): c for c in shape.COLORMAPS}
 
 
+def _typed_value(single):
+    """The shortest decimal that rounds to the single-precision number ``single``."""
+    return float(str(np.float32(single)))
+
+
 def resolve_radius(radius, vertices):
     """Radius in model units from a PercentageValue, a PureValue, a number or None.
 
     ``PercentageValue(p)`` is p percent of the bounding-box diagonal of the finite vertices
-    (:func:`meshcurv.io.bbox_diagonal`); ``PureValue(r)`` and plain numbers are model units;
-    None keeps the estimator's default (the ball holding about 100 points).
+    (:func:`meshcurv.io.bbox_diagonal`, double precision); ``PureValue(r)`` and plain numbers
+    are model units; None keeps the estimator's default (the ball holding about 100 points).
+
+    pymeshlab stores PureValue and PercentageValue in single precision (``PureValue(0.45)
+    .value()`` is 0.449999988...); they are read back as the shortest decimal that rounds to
+    the same single-precision number, i.e. the value that was typed (0.45). Pass a plain float
+    for a radius with more than 7 significant digits.
     """
     if radius is None:
         return None
     if isinstance(radius, pymeshlab.PercentageValue):
-        value = radius.value() / 100.0 * bbox_diagonal(vertices)
+        value = _typed_value(radius.value()) / 100.0 * bbox_diagonal(vertices)
     elif isinstance(radius, pymeshlab.PureValue):
-        value = radius.value()
+        value = _typed_value(radius.value())
     elif isinstance(radius, (int, float, np.integer, np.floating)) and not isinstance(radius, bool):
         value = float(radius)
     else:
@@ -122,12 +134,17 @@ def compute_curvature_cga_per_vertex(self, radius=None, ndirections=8, neighborh
       there is no estimate) and ``valid`` (1 or 0)
     * custom point attributes ``d1, d2``: unit principal directions (NaN where invalid)
 
+    Running the filter again overwrites these attributes. MeshLab cannot delete or refill an
+    attribute from Python, so the new values pass through carrier attributes
+    ``meshcurv_tmp_<k>`` that stay on the mesh (and are not saved by ``save_current_mesh``).
+
     Parameter list:
 
     radius : PercentageValue | PureValue | float = None
         Neighbourhood radius. ``PercentageValue(p)``: p % of the bounding-box diagonal;
         ``PureValue(r)`` or a float: model units; None: the radius whose ball holds about 100
-        points (works at any mesh size and sampling).
+        points (works at any mesh size and sampling). PureValue and PercentageValue hold single
+        precision and are read as the decimal typed (see :func:`resolve_radius`).
     ndirections : int = 8
         Normal-section planes per vertex (2 x ndirections circle fits).
     neighborhood : str = 'auto'
@@ -190,9 +207,14 @@ def compute_curvature_cga_per_vertex(self, radius=None, ndirections=8, neighborh
     elif normals == "auto" and point_cloud and _usable_normals(mesh_normals):
         given = mesh_normals
 
-    res = principal_curvatures(v, None if point_cloud else f, normals=given,
-                               radius=resolve_radius(radius, v), n_directions=int(ndirections),
-                               neighborhood=neighborhood, slab=float(slab))
+    with warnings.catch_warnings():
+        # pymeshlab ships an older TBB than numba accepts; numba then falls back to OpenMP
+        # but warns about it on its first parallel launch, which is noise for a filter user
+        warnings.filterwarnings("ignore", message=".*TBB threading layer.*")
+        res = principal_curvatures(v, None if point_cloud else f, normals=given,
+                                   radius=resolve_radius(radius, v),
+                                   n_directions=int(ndirections), neighborhood=neighborhood,
+                                   slab=float(slab))
 
     fields = {name: getattr(res, name) for name in shape.FIELDS}
     for name, values in fields.items():

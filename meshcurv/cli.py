@@ -6,6 +6,8 @@ Expected errors print one line ``meshcurv: error: ...`` on stderr and leave no o
 """
 
 import argparse
+import contextlib
+import functools
 import os
 import sys
 import time
@@ -21,17 +23,27 @@ __all__ = ["main", "AnnotateOptions", "parse_radius", "annotate_file", "run_batc
 _DESCRIPTION = """\
 Principal curvatures of meshes and point clouds by CGA circle fits (Seibert et al.).
 
-Conventions: curvatures are in 1/model units, signed for OUTWARD normals with convex positive
-(a sphere of radius r gives k1 = k2 = +1/r, shape index +1), and k1 >= k2. Radii are given
-either in model units (--radius 0.05) or in percent of the bounding-box diagonal
-(--radius 2%%), as in MeshLab. Vertices are never reordered, merged or dropped (STL corners are
-merged by position on reading); vertices without an estimate have NaN curvature, valid = 0,
-quality 0 and a grey colour.
+Units: k1, k2, mean and curvedness in 1/model units, gaussian in 1/model units^2, shape index
+without unit in [-1, 1] (+1 cap, +0.5 ridge, 0 saddle, -0.5 rut, -1 cup).
+Sign: for OUTWARD normals, convex positive: a sphere of radius r gives k1 = k2 = +1/r, mean
++1/r, shape index +1; k1 >= k2 always. Meshes take the orientation of their faces
+(counter-clockwise seen from outside); point clouds use their normals or estimate and orient
+them (flip the cloud's normals to flip every sign).
+Radius: in model units (--radius 0.05) or in percent of the bounding-box diagonal (--radius 2%),
+as in MeshLab; default: the radius whose ball holds about 100 points.
+Vertices are never reordered, merged or dropped (STL corners are merged by position on reading);
+vertices without an estimate have NaN curvature, valid = 0, quality 0 and a grey colour.
 
 Exit codes: 0 success, 1 a file could not be processed, 2 command-line error."""
 
 _RADIUS_HELP = ("neighbourhood radius: a number in model units (0.05) or a percentage of the "
                 "bounding-box diagonal (2%%); default: the radius whose ball holds ~100 points")
+
+
+def _one_line(exc):
+    """The first line of an exception's message (its type name when it has none)."""
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
 
 
 class CommandError(Exception):
@@ -280,6 +292,29 @@ def output_path_for(input_path, out_dir, suffix="_curvature", extension=".ply"):
     return os.path.join(out_dir, stem + suffix + extension)
 
 
+@contextlib.contextmanager
+def dask_client(scheduler, timeout="20s"):
+    """A ``distributed.Client`` for ``scheduler``: an address (connected here and closed on
+    exit) or an existing Client (used as is). Failures raise CommandError with one line."""
+    if hasattr(scheduler, "submit"):
+        yield scheduler
+        return
+    try:
+        from distributed import Client
+    except ImportError:
+        raise CommandError("--dask-scheduler needs dask.distributed "
+                           "(pip install 'meshcurv[dask]')", 2) from None
+    try:
+        client = Client(scheduler, timeout=timeout)
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise CommandError(f"cannot connect to the Dask scheduler {scheduler}: "
+                           f"{_one_line(exc)}") from None
+    try:
+        yield client
+    finally:
+        client.close()
+
+
 def run_batch(inputs, out_dir, options=AnnotateOptions(), jobs=1, overwrite=False,
               scheduler=None, progress=None):
     """Annotate many files; returns a list of per-file result dicts, in input order.
@@ -288,10 +323,8 @@ def run_batch(inputs, out_dir, options=AnnotateOptions(), jobs=1, overwrite=Fals
     ``error``. Outputs that exist are skipped unless ``overwrite`` (writes are atomic, so an
     existing output is complete). ``jobs > 1`` uses that many processes; ``scheduler`` (a Dask
     scheduler address or a ``distributed.Client``) runs the files on a Dask cluster whose
-    workers see the same paths.
+    workers see the same paths: only paths and options travel, never mesh data.
     """
-    from tqdm.auto import tqdm
-
     inputs = [os.path.abspath(p) for p in _expand_inputs(inputs)]
     out_dir = os.path.abspath(out_dir)
     outputs = [output_path_for(p, out_dir) for p in inputs]
@@ -307,6 +340,22 @@ def run_batch(inputs, out_dir, options=AnnotateOptions(), jobs=1, overwrite=Fals
             results[k] = {"input": i, "output": o, "status": "skipped"}
         else:
             todo.append(k)
+    if scheduler is not None and todo:
+        with dask_client(scheduler) as client:  # connect before creating anything
+            _batch_loop(todo, results, out_dir, progress, functools.partial(
+                _batch_dask, client, inputs, outputs, options, todo))
+        return results
+    runner = _batch_pool if jobs > 1 and len(todo) > 1 else _batch_serial
+    _batch_loop(todo, results, out_dir, progress, functools.partial(
+        runner, inputs, outputs, options, todo, jobs=jobs))
+    return results
+
+
+def _batch_loop(todo, results, out_dir, progress, run):
+    """Create ``out_dir`` and call ``run(record)`` under a progress bar; ``record(k, result)``
+    stores file k's result dict in ``results``."""
+    from tqdm.auto import tqdm
+
     os.makedirs(out_dir, exist_ok=True)
     bar = tqdm(total=len(todo), desc="meshcurv batch", unit="file", file=sys.stderr,
                disable=progress is False or (progress is None and not sys.stderr.isatty()))
@@ -318,61 +367,60 @@ def run_batch(inputs, out_dir, options=AnnotateOptions(), jobs=1, overwrite=Fals
             bar.write(f"failed: {res['error']}", file=sys.stderr)
 
     try:
-        if scheduler is not None and todo:
-            _batch_dask(scheduler, inputs, outputs, options, todo, record)
-        elif jobs > 1 and len(todo) > 1:
-            import multiprocessing
-            from concurrent.futures import ProcessPoolExecutor, as_completed
-
-            threads = max(1, (os.cpu_count() or 1) // jobs)
-            with ProcessPoolExecutor(max_workers=min(jobs, len(todo)),
-                                     mp_context=multiprocessing.get_context("spawn"),
-                                     initializer=_init_worker, initargs=(threads,)) as pool:
-                futures = {pool.submit(_run_one, inputs[k], outputs[k], options): k
-                           for k in todo}
-                for fut in as_completed(futures):
-                    k = futures[fut]
-                    try:
-                        res = fut.result()
-                    except Exception as exc:  # worker died (e.g. out of memory)
-                        res = {"input": inputs[k], "output": outputs[k], "status": "failed",
-                               "error": f"worker failed: {type(exc).__name__}: {exc}"}
-                    record(k, res)
-        else:
-            for k in todo:
-                record(k, _run_one(inputs[k], outputs[k], options))
+        run(record)
     finally:
         bar.close()
-    return results
 
 
-def _batch_dask(scheduler, inputs, outputs, options, todo, record):
-    """Run the pending files as Dask tasks; file paths travel, data stays on the workers."""
-    try:
-        from distributed import Client, as_completed
-    except ImportError:
-        raise CommandError("--dask-scheduler needs dask.distributed "
-                           "(pip install 'meshcurv[dask]')", 2) from None
-    own = not hasattr(scheduler, "submit")
-    try:
-        client = Client(scheduler, timeout="20s") if own else scheduler
-    except (OSError, TimeoutError, ValueError) as exc:
-        raise CommandError(f"cannot connect to the Dask scheduler {scheduler}: {exc}") from None
-    try:
-        futures = {client.submit(_run_one, inputs[k], outputs[k], options, pure=False,
-                                 key=f"meshcurv-{k}-{os.path.basename(inputs[k])}-{time.time_ns()}"):
-                   k for k in todo}
+def _batch_serial(inputs, outputs, options, todo, record, jobs=1):
+    """The pending files one after the other, in this process."""
+    for k in todo:
+        record(k, _run_one(inputs[k], outputs[k], options))
+
+
+def _worker_failure(k, inputs, outputs, exc):
+    return {"input": inputs[k], "output": outputs[k], "status": "failed",
+            "error": f"worker failed: {type(exc).__name__}: {_one_line(exc)}"}
+
+
+def _batch_pool(inputs, outputs, options, todo, record, jobs=2):
+    """The pending files on a local process pool (spawned: numba and OpenMP are not fork-safe)."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    threads = max(1, (os.cpu_count() or 1) // jobs)
+    with ProcessPoolExecutor(max_workers=min(jobs, len(todo)),
+                             mp_context=multiprocessing.get_context("spawn"),
+                             initializer=_init_worker, initargs=(threads,)) as pool:
+        futures = {pool.submit(_run_one, inputs[k], outputs[k], options): k for k in todo}
         for fut in as_completed(futures):
             k = futures[fut]
             try:
                 res = fut.result()
-            except Exception as exc:
-                res = {"input": inputs[k], "output": outputs[k], "status": "failed",
-                       "error": f"worker failed: {type(exc).__name__}: {exc}"}
+            except Exception as exc:  # the worker died (e.g. out of memory)
+                res = _worker_failure(k, inputs, outputs, exc)
             record(k, res)
-    finally:
-        if own:
-            client.close()
+
+
+def _batch_dask(client, inputs, outputs, options, todo, record):
+    """The pending files as Dask tasks: file paths travel, data stays on the workers."""
+    from distributed import as_completed
+
+    token = time.time_ns()
+    futures = {client.submit(_run_one, inputs[k], outputs[k], options, pure=False,
+                             key=f"meshcurv-{k}-{os.path.basename(inputs[k])}-{token}"): k
+               for k in todo}
+    try:
+        for fut in as_completed(futures):
+            k = futures[fut]
+            try:
+                res = fut.result()
+            except Exception as exc:  # KilledWorker, lost connection, ...
+                res = _worker_failure(k, inputs, outputs, exc)
+            record(k, res)
+    except BaseException:
+        client.cancel(list(futures))
+        raise
 
 
 # ------------------------------------------------------------------------------------- info
@@ -426,13 +474,24 @@ def _add_estimation_options(p):
                    help="auto: a point cloud's own normals if the file has them, else "
                         "estimated (face normals for meshes, PCA + orientation for clouds); "
                         "file: require the file's normals; estimate: ignore them")
-    g = p.add_argument_group("output")
+    g = p.add_argument_group("output (PLY; a LAS/LAZ output has no quality or colour)")
     g.add_argument("--quality", choices=shape.FIELDS, default="mean",
                    help="field copied to the PLY 'quality' property and coloured (default mean)")
     g.add_argument("--colormap", default="Turbo", metavar="NAME",
                    help=f"colour ramp, MeshLab's names: {', '.join(shape.COLORMAPS)} "
                         "(default Turbo; shape index on [-1, 1], other fields clamped at the "
                         "2nd/98th percentile)")
+
+
+def _positive_float(text):
+    """argparse type: a positive finite number (model units)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number in model units, got {text!r}")
+    if not (np.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+    return value
 
 
 def _options_from(args):
@@ -454,16 +513,37 @@ def build_parser():
     readable = ", ".join(sorted(io.READERS))
 
     p = sub.add_parser(
-        "annotate", help="write a PLY with per-vertex curvature fields",
-        description=_DESCRIPTION + f"\n\nReads {readable}; writes a binary PLY with float64 "
-        "vertex properties k1 k2 mean gaussian shape_index curvedness, valid (uint8), d1x..d2z, "
-        "nx ny nz, n_neighbors, n_samples, residual, quality and red green blue.",
+        "annotate", help="write a PLY (or LAS/LAZ) with per-vertex curvature fields",
+        description=_DESCRIPTION + f"\n\nReads {readable}.\nWrites (atomically; the output "
+        "directory is created) a binary little-endian PLY with float64\nvertex properties "
+        "k1 k2 mean gaussian shape_index curvedness, valid (uint8),\nd1x d1y d1z d2x d2y d2z "
+        "(unit principal directions), nx ny nz, n_neighbors n_samples (int32),\nresidual, "
+        "quality (the --quality field, 0 where invalid) and red green blue (uint8, the\n"
+        "--colormap ramp over it), plus the faces. A .las/.laz output (from a .las/.laz input) "
+        "keeps\nevery point record and adds k1 .. d2z as extra-bytes dimensions; with "
+        "--tile-size or\n--dask-scheduler the cloud is processed in tiles on Dask.\n\nExamples:\n"
+        "  meshcurv annotate examples/torus.ply -o out/torus_curvature.ply "
+        "--preview out/torus_shape_index.png\n"
+        "  meshcurv annotate scan.xyz -o scan_curvature.ply --radius 2% --quality shape_index\n"
+        "  meshcurv annotate scan.laz -o scan_curvature.laz --radius 0.5 --tile-size 50",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("input", help=f"mesh or point cloud ({readable})")
-    p.add_argument("-o", "--output", required=True, help="annotated output, .ply")
+    p.add_argument("-o", "--output", required=True,
+                   help="annotated output: .ply, or .las/.laz for a .las/.laz input")
     p.add_argument("--preview", metavar="PNG", default=None,
                    help="also render a PNG coloured by shape index (needs matplotlib)")
     p.add_argument("--progress", action="store_true", help="show a per-point progress bar")
+    g = p.add_argument_group(
+        "large LAS/LAZ clouds (tiled on Dask; input and output .las or .laz)")
+    g.add_argument("--tile-size", type=_positive_float, default=None, metavar="S",
+                   help="cut the cloud into S x S tiles (model units, in x and y) with a halo "
+                        "of one radius and estimate them as Dask tasks; the result is written "
+                        "in input order (default with --dask-scheduler: about 10^6 points per "
+                        "tile). Needs the dask and las extras")
+    g.add_argument("--dask-scheduler", metavar="ADDRESS", default=None,
+                   help="run the tiles on this Dask scheduler (tcp://host:8786; workers must "
+                        "see the input and output paths); without it --tile-size starts a "
+                        "local cluster")
     _add_estimation_options(p)
 
     p = sub.add_parser(
@@ -488,14 +568,80 @@ def build_parser():
     return parser
 
 
+def _las_bbox_diagonal(path):
+    """Bounding-box diagonal from a LAS/LAZ header (for ``--radius 2%`` on tiled runs)."""
+    import laspy
+
+    try:
+        with laspy.open(path) as reader:
+            lo = np.asarray(reader.header.mins, float)
+            hi = np.asarray(reader.header.maxs, float)
+    except Exception as exc:  # laspy raises many types on a bad header
+        raise io.MeshFileError(f"{path}: not a readable LAS/LAZ file ({exc})") from exc
+    return float(np.linalg.norm(hi - lo))
+
+
+def _cmd_annotate_tiled(args, options):
+    """``annotate --tile-size/--dask-scheduler``: hand the LAS/LAZ file to annotate_tiled."""
+    las_ext = (".las", ".laz")
+    for path, what in ((args.input, "input"), (args.output, "output")):
+        if io._extension(path) not in las_ext:
+            raise CommandError(f"{path}: --tile-size and --dask-scheduler need a .las or .laz "
+                               f"{what} (for many mesh files use: meshcurv batch "
+                               "--dask-scheduler)", 2)
+    if args.preview is not None:
+        raise CommandError("--preview is not available with --tile-size/--dask-scheduler "
+                           "(the cloud is never in memory as a whole)", 2)
+    if options.neighborhood == "kring":
+        raise CommandError("--neighborhood kring needs mesh faces; a LAS/LAZ cloud uses ball", 2)
+    if options.normals != "auto":
+        raise CommandError("--normals: tiled runs use the file's normals when it has them and "
+                           "estimate them otherwise (--normals auto)", 2)
+    if not os.path.isfile(args.input):
+        raise io.MeshFileError(f"{args.input}: no such file")
+    try:
+        from .tiled import TileError, annotate_tiled
+    except ImportError as exc:
+        raise CommandError(f"--tile-size/--dask-scheduler need dask.distributed and laspy "
+                           f"(pip install 'meshcurv[dask,las]'): {exc}", 2) from None
+    radius = None
+    if options.radius is not None:
+        value, percent = parse_radius(options.radius)
+        radius = value / 100.0 * _las_bbox_diagonal(args.input) if percent else value
+    with contextlib.ExitStack() as stack:
+        # connect first: an unreachable scheduler then leaves no work folder behind
+        client = (None if args.dask_scheduler is None
+                  else stack.enter_context(dask_client(args.dask_scheduler)))
+        try:
+            report = annotate_tiled(args.input, args.output, radius=radius,
+                                    tile_size=args.tile_size, scheduler=client,
+                                    progress=bool(args.progress or sys.stderr.isatty()),
+                                    n_directions=int(options.directions),
+                                    neighborhood=options.neighborhood)
+        except TileError as exc:
+            raise CommandError(f"{_one_line(exc)} (finished tiles are kept "
+                               f"in {args.output}.meshcurv-work; re-run to resume)") from None
+    print(f"{args.output}: {getattr(report, 'n_points', '?')} points in "
+          f"{getattr(report, 'n_tiles', '?')} tiles of side {args.tile_size or 'auto'} "
+          f"(model units), radius {getattr(report, 'radius', radius)} (model units), "
+          f"{getattr(report, 'seconds', 0.0):.1f} s")
+    return 0
+
+
 def _cmd_annotate(args):
     options = _options_from(args)
     _check_options(options)
+    if args.tile_size is not None or args.dask_scheduler is not None:
+        return _cmd_annotate_tiled(args, options)
     if io._extension(args.output) not in io.WRITERS:
         raise CommandError(f"{args.output}: output must be one of "
                            f"{', '.join(sorted(io.WRITERS))}", 2)
     if args.preview is not None and io._extension(args.preview) != ".png":
         raise CommandError(f"{args.preview}: --preview must be a .png file", 2)
+    las_ext = (".las", ".laz")
+    if io._extension(args.output) in las_ext and io._extension(args.input) not in las_ext:
+        raise CommandError(f"{args.output}: LAS/LAZ output needs a LAS/LAZ input (its points "
+                           "are copied with added curvature fields); write .ply", 2)
     try:
         io.check_distinct(args.input, args.output)
     except io.MeshFileError as exc:
@@ -517,6 +663,9 @@ def _cmd_batch(args):
     _check_options(options)
     if args.jobs < 1:
         raise CommandError("--jobs must be at least 1", 2)
+    if not _expand_inputs(args.inputs):
+        raise CommandError(f"no input files in {' '.join(args.inputs)} (readable: "
+                           f"{', '.join(sorted(io.READERS))})", 2)
     results = run_batch(args.inputs, args.out_dir, options, jobs=args.jobs,
                         overwrite=args.overwrite, scheduler=args.dask_scheduler)
     counts = {s: sum(r["status"] == s for r in results) for s in ("ok", "skipped", "failed")}
@@ -524,7 +673,9 @@ def _cmd_batch(args):
           f"exists), {counts['failed']} failed, in {args.out_dir}")
     for r in results:
         if r["status"] == "failed":
-            print(f"  FAILED {r['input']}: {r['error']}", file=sys.stderr)
+            named = r["error"].startswith(r["input"])  # most messages start with the file
+            print(f"  FAILED {r['error'] if named else r['input'] + ': ' + r['error']}",
+                  file=sys.stderr)
     return 1 if counts["failed"] else 0
 
 
@@ -546,8 +697,7 @@ def main(argv=None):
         print(f"meshcurv: error: {exc}", file=sys.stderr)
         return exc.code
     except (io.MeshFileError, ValueError, OSError) as exc:
-        print(f"meshcurv: error: {str(exc).splitlines()[0] if str(exc) else exc!r}",
-              file=sys.stderr)
+        print(f"meshcurv: error: {_one_line(exc)}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("meshcurv: interrupted", file=sys.stderr)

@@ -13,6 +13,11 @@ properties: ``x y z nx ny nz`` (float64), ``k1 k2 mean gaussian shape_index curv
 ``n_neighbors n_samples`` (int32), ``residual`` (float64), ``quality`` (float64, the chosen
 field with 0 where invalid) and ``red green blue`` (uint8), plus the ``face`` element.
 plyfile, Open3D and MeshLab read these at full precision.
+
+LAS/LAZ point clouds (optional extra ``las``: laspy + lazrs) are read into memory by
+:func:`read_las`; :func:`write_las` copies the input's points unchanged and adds the curvature
+fields as named extra-bytes dimensions (:mod:`meshcurv.las`). For clouds larger than memory use
+:func:`meshcurv.tiled.annotate_tiled` (``meshcurv annotate --tile-size``).
 """
 
 import os
@@ -172,7 +177,8 @@ def read_xyz(path):
         raise ValueError(f"rows have different numbers of columns: {sorted(ncol)}")
     ncol = ncol.pop()
     if ncol not in (3, 4, 6, 7):
-        raise ValueError(f"expected 3 (x y z), 6 (x y z nx ny nz), 4 or 7 (PTS) columns, got {ncol}")
+        raise ValueError(f"expected 3 (x y z), 6 (x y z nx ny nz), 4 or 7 (PTS) columns, "
+                         f"got {ncol}")
     table = np.array(lines, dtype=np.float64)
     data = MeshData(vertices=np.ascontiguousarray(table[:, :3]), path=path)
     if ncol == 6:
@@ -185,8 +191,35 @@ def read_xyz(path):
     return data
 
 
+def _las_module(path):
+    """:mod:`meshcurv.las`, or a MeshFileError naming ``path`` when laspy is not installed."""
+    try:
+        import laspy  # noqa: F401  (las.py imports it lazily; fail here with a useful message)
+    except ImportError:
+        raise MeshFileError(f"{path}: LAS/LAZ files need laspy and lazrs "
+                            "(pip install 'meshcurv[las]')") from None
+    from . import las
+
+    return las
+
+
+def read_las(path):
+    """Read a LAS/LAZ point cloud (laspy; LAZ through lazrs) into memory, in file order.
+
+    ``vertices`` are the scaled x, y, z (model units); ``normals`` come from NormalX..NormalZ
+    (or nx.., normal_x..) extra dimensions when the file has them. Clouds larger than memory
+    go through :func:`meshcurv.tiled.annotate_tiled` instead.
+    """
+    las = _las_module(path)
+    try:
+        xyz, normals = las.read_las_points(path)
+    except las.LasReadError as exc:  # its message already names the file
+        raise MeshFileError(str(exc).splitlines()[0]) from exc
+    return MeshData(vertices=xyz, normals=normals, path=path)
+
+
 READERS = {".ply": read_ply, ".obj": read_trimesh, ".off": read_trimesh, ".stl": read_trimesh,
-           ".xyz": read_xyz, ".pts": read_xyz}
+           ".xyz": read_xyz, ".pts": read_xyz, ".las": read_las, ".laz": read_las}
 
 
 def register_reader(extension, reader):
@@ -233,7 +266,10 @@ def read(path):
         data = READERS[ext](path)
     except MeshFileError:
         raise
-    except (OSError, UnicodeDecodeError) as exc:
+    except UnicodeDecodeError as exc:  # binary junk where a text header or table belongs
+        raise MeshFileError(f"{path}: not a valid {ext[1:].upper()} file (binary data where "
+                            f"text was expected at byte {exc.start})") from exc
+    except OSError as exc:
         raise MeshFileError(f"{path}: cannot read file ({exc})") from exc
     except Exception as exc:  # parsers raise anything on corrupt input
         msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
@@ -367,7 +403,27 @@ def write_annotated(path, data, result, quality="mean", colormap="Turbo", clamp=
     write_ply(path, data.vertices, None if data.is_point_cloud else data.faces, fields)
 
 
-WRITERS = {".ply": write_annotated}
+def write_las(path, data, result, quality=None, colormap=None, clamp=None):
+    """Write the LAS/LAZ input of ``data`` with the curvature ``result`` to ``path`` (atomic).
+
+    Every point record of the input is copied unchanged and the fields of
+    :data:`meshcurv.las.CURVATURE_FIELDS` (float64, ``valid`` uint8) are added as named
+    extra-bytes dimensions, plus NormalX..NormalZ when the input has no normals; see
+    :mod:`meshcurv.las`. ``.laz`` output is compressed. LAS has no colour ramp or quality
+    property, so ``quality``, ``colormap`` and ``clamp`` are accepted and ignored.
+    """
+    if _extension(data.path) not in (".las", ".laz"):
+        raise MeshFileError(f"{path}: LAS/LAZ output adds fields to the points of a LAS/LAZ "
+                            f"input, but the input is {data.path or 'in memory'}; write .ply")
+    check_distinct(data.path, path)
+    las = _las_module(path)
+    try:
+        las.write_las_curvature(data.path, path, result)
+    except las.LasReadError as exc:
+        raise MeshFileError(str(exc).splitlines()[0]) from exc
+
+
+WRITERS = {".ply": write_annotated, ".las": write_las, ".laz": write_las}
 
 
 def register_writer(extension, writer):

@@ -349,13 +349,14 @@ def _tile_normals(xyz, radius):
     nv = np.full(xyz.shape, np.nan)
     finite = np.flatnonzero(np.isfinite(xyz).all(axis=1))
     if len(finite):
-        # the search the estimator itself uses, so the neighbour lists are the same
+        # the search and list order the estimator itself uses (its step 2), so that the own
+        # points' normals are the same floating-point numbers as in a whole-cloud run
         tree = ball_grid(xyz, radius)
         if tree is None:
             tree = cKDTree(xyz[finite])
         for s in range(0, len(xyz), 65536):
             idx = np.arange(s, min(s + 65536, len(xyz)))
-            indptr, indices = ball_neighbors(tree, finite, xyz[idx], radius)
+            indptr, indices = ball_neighbors(tree, finite, xyz[idx], radius, ascending=False)
             nv[idx] = pca_normals(xyz, xyz[idx], indptr, indices, radius)
     return orient_mst(xyz, nv)
 

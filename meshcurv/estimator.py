@@ -297,6 +297,14 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
                 return np.zeros(len(idx) + 1, dtype=np.int64), np.zeros(0, dtype=np.int64)
             return ball_neighbors(tree, finite, v[idx], radius, ascending=False)
 
+    def visiting_order(idx):
+        """Order of the positions in ``idx`` to process: by grid cell for ball queries (the
+        points a block touches then stay in cache); as given for k-rings, whose memory
+        accesses follow the mesh's own numbering."""
+        if use_kring:
+            return np.arange(len(idx))
+        return spatial_order(v[idx], radius)
+
     # 2. normals: given, from the faces, or a PCA plane fit over each block's neighbourhood
     # (oriented by the faces or towards the viewpoint block by block; along a spanning tree in
     # a first pass of its own, as the tree needs every normal)
@@ -330,7 +338,7 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
         # the tree's graph: each point's nearest neighbours, taken from the lists at hand
         nv = np.full((n, 3), np.nan)
         graph = np.full((n, _TREE_NEIGHBOURS), -1, dtype=np.int64)
-        for pos in _blocks(spatial_order(v, radius), progress, "normals"):
+        for pos in _blocks(visiting_order(np.arange(n)), progress, "normals"):
             indptr, indices = neighbours(pos)
             nv[pos] = nrm.pca_normals(v, v[pos], indptr, indices, radius)
             graph[pos] = kernels.nearest_in_lists(v, v[pos], indptr, indices, _TREE_NEIGHBOURS)
@@ -354,7 +362,7 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
     b_k1, b_k2, b_res, b_noise = (np.empty(size) for _ in range(4))
     b_d1, b_d2 = np.empty((size, 3)), np.empty((size, 3))
     b_samples, b_neighbours = np.empty(size), np.empty(size)
-    for pos in _blocks(spatial_order(v[query], radius), progress, "curvature"):
+    for pos in _blocks(visiting_order(query), progress, "curvature"):
         idx = query[pos]
         b = len(idx)
         indptr, indices = neighbours(idx)

@@ -128,13 +128,14 @@ def torus_cloud(n_points, major=2.0, minor=0.5, seed=0):
 
 
 def datasets(quick):
-    """(name, vertices, faces or None, exact normals) of the benchmark, smallest first."""
+    """(name, make) of the benchmark's data sets, smallest first; ``make()`` returns
+    (vertices, faces or None, exact normals)."""
     small, large = (4000, 16000) if quick else (100_000, 1_000_000)
     out = []
     for n in (small, large):
-        out.append((f"torus {_count(n)}", *torus_mesh(n)))
-        out.append((f"sphere {_count(n)}", *sphere_mesh(n)))
-    out.append((f"cloud {_count(large)}", *torus_cloud(large)))
+        out.append((f"torus {_count(n)}", lambda n=n: torus_mesh(n)))
+        out.append((f"sphere {_count(n)}", lambda n=n: sphere_mesh(n)))
+    out.append((f"cloud {_count(large)}", lambda: torus_cloud(large)))
     return out
 
 
@@ -278,40 +279,47 @@ def first_call_times():
     return json.loads(p.stdout.strip().splitlines()[-1])
 
 
-def stage_times(v, f, normals, radius, repeat):
-    """Seconds spent in each stage of a meshcurv call, timed one stage at a time.
+def stage_times(v, f, normals, radius):
+    """Where the time of a meshcurv call goes: seconds per compiled kernel, and the rest.
 
-    Stages: neighbour lists (k-ring on meshes, grid ball query on clouds), PCA normals over
-    those lists, their orientation (MST on clouds), and the curvature kernel with given normals.
+    Every function of :mod:`meshcurv.kernels` is wrapped with a timer for the duration of one
+    call with the normals given and one with them estimated; the kernels are the leaves of the
+    pipeline (neighbour search, normals, orientation, circle fits), and what remains of the
+    call's time is numpy and Python glue. Returns ``{mode: {stage: seconds}}``.
     """
-    from meshcurv import kernels, neighborhoods as nb, normals as nrm
-
-    n = len(v)
-    q = np.arange(n, dtype=np.int64)
-    out = {}
-    if f is not None:
-        adjacency = nb.edge_adjacency(f, n)
-        work = nb.KringWork(n)
-        out["neighbours (k-ring)"] = measure(lambda: nb.kring_neighbors(v, adjacency, radius, q,
-                                                                          work), repeat)[0]
-        indptr, indices = nb.kring_neighbors(v, adjacency, radius, q, work)
-    else:
-        grid = nb.ball_grid(v, radius)
-        out["neighbours (ball)"] = measure(lambda: nb.ball_neighbors(grid, None, v, radius),
-                                           repeat)[0]
-        indptr, indices = nb.ball_neighbors(grid, None, v, radius)
-    out["PCA normals"] = measure(lambda: nrm.pca_normals(v, v, indptr, indices, radius), repeat)[0]
-    if f is None:
-        est = nrm.pca_normals(v, v, indptr, indices, radius)
-        out["orientation (MST)"] = measure(lambda: nrm.orient_mst(v, est.copy()), 1)[0]
     import meshcurv
+    from meshcurv import kernels
 
-    unit = np.ascontiguousarray(normals, dtype=np.float64)
-    kind = "kring" if f is not None else "ball"
-    out["whole call, normals given"] = measure(
-        lambda: meshcurv.principal_curvatures(v, f, normals=unit, radius=radius,
-                                              neighborhood=kind), repeat)[0]
-    out["neighbours per vertex"] = float(np.diff(indptr).mean())
+    spent = {}
+    originals = {name: fn for name, fn in vars(kernels).items()
+                 if hasattr(fn, "py_func") and not name.startswith("_")}
+
+    def timed(name, fn):
+        def call(*args, **kwargs):
+            t0 = time.perf_counter()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                spent[name] = spent.get(name, 0.0) + time.perf_counter() - t0
+        return call
+
+    out = {}
+    try:
+        for name, fn in originals.items():
+            setattr(kernels, name, timed(name, fn))
+        for mode, kwargs in (("normals given", dict(normals=normals)),
+                             ("normals estimated", dict(normal_estimation="pca"))):
+            spent.clear()
+            t0 = time.perf_counter()
+            meshcurv.principal_curvatures(v, f, radius=radius, **kwargs)
+            total = time.perf_counter() - t0
+            stages = dict(sorted(spent.items(), key=lambda kv: -kv[1]))
+            stages["other (numpy, Python)"] = total - sum(spent.values())
+            stages["total"] = total
+            out[mode] = stages
+    finally:
+        for name, fn in originals.items():
+            setattr(kernels, name, fn)
     return out
 
 
@@ -319,7 +327,7 @@ def stage_times(v, f, normals, radius, repeat):
 # Run and report
 # ---------------------------------------------------------------------------------------------
 
-def run(quick=False, repeat=3, apss_timeout=900.0, methods=None, stages=True):
+def run(quick=False, repeat=3, apss_timeout=900.0, methods=None, stages=True, data=None):
     """Run the benchmark; returns a dict with ``rows`` (one per data set and method) and more."""
     from meshcurv.neighborhoods import default_radius
 
@@ -332,7 +340,10 @@ def run(quick=False, repeat=3, apss_timeout=900.0, methods=None, stages=True):
     meshcurv.principal_curvatures(warm_v)
     report = dict(threads=numba.get_num_threads(), cpus=os.cpu_count(), quick=quick,
                   repeat=repeat, rows=[], stages={}, first_call=first_call_times())
-    for name, v, f, exact_normals in datasets(quick):
+    for name, make in datasets(quick):
+        if data and not any(name.startswith(d) for d in data):
+            continue
+        v, f, exact_normals = make()
         n = len(v)
         radius = default_radius(v)
         # one call per method on the 1M sets keeps the run short; MeshLab SDQF alone takes minutes
@@ -358,7 +369,7 @@ def run(quick=False, repeat=3, apss_timeout=900.0, methods=None, stages=True):
                                        seconds=seconds, peak_bytes=peak, status=status))
             _progress(report["rows"][-1])
         if stages and n >= (16000 if quick else 1_000_000):
-            report["stages"][name] = stage_times(v, f, exact_normals, radius, rep)
+            report["stages"][name] = stage_times(v, f, exact_normals, radius)
     _add_ratios(report)
     return report
 
@@ -419,10 +430,16 @@ def format_table(report):
     lines += [f"Fresh process, warm numba cache: `import meshcurv` {fc['import_s']:.2f} s, first "
               f"call on a mesh {fc['first_mesh_s']:.2f} s, on a point cloud "
               f"{fc['first_cloud_s']:.2f} s.", ""]
-    for name, st in report["stages"].items():
-        lines += [f"Stages on {name} (each timed alone):", "", "| stage | s |", "|---|---:|"]
-        for k, val in st.items():
-            lines.append(f"| {k} | {val:.3f} |")
+    for name, modes in report["stages"].items():
+        lines += [f"Time by compiled kernel in one call on {name}:", "",
+                  "| kernel | " + " | ".join(f"{m} (s)" for m in modes) + " |",
+                  "|---|" + "---:|" * len(modes)]
+        keys = list(dict.fromkeys(k for st in modes.values() for k in st))
+        keys = [k for k in keys if k not in ("other (numpy, Python)", "total")] + \
+            ["other (numpy, Python)", "total"]
+        for k in keys:
+            lines.append(f"| {k} | " + " | ".join(f"{st[k]:.3f}" if k in st else ""
+                                                  for st in modes.values()) + " |")
         lines.append("")
     return "\n".join(lines)
 
@@ -437,6 +454,7 @@ def main(argv=None):
     ap.add_argument("--repeat", type=int, default=3, help="calls per measurement (median)")
     ap.add_argument("--json", metavar="PATH", help="also write the results as JSON")
     ap.add_argument("--methods", nargs="*", help="only methods whose label starts with these")
+    ap.add_argument("--data", nargs="*", help="only data sets whose name starts with these")
     ap.add_argument("--no-stages", action="store_true", help="skip the per-stage split")
     ap.add_argument("--apss-timeout", type=float, default=900.0, help="seconds per APSS run")
     ap.add_argument("--apss-worker", metavar="NPZ", help=argparse.SUPPRESS)
@@ -449,7 +467,7 @@ def main(argv=None):
         env = dict(os.environ, **{_MMAP_ENV: "65536"})
         os.execve(sys.executable, [sys.executable, os.path.abspath(__file__)] + sys.argv[1:], env)
     report = run(quick=args.quick, repeat=args.repeat, apss_timeout=args.apss_timeout,
-                 methods=args.methods, stages=not args.no_stages)
+                 methods=args.methods, stages=not args.no_stages, data=args.data)
     print(format_table(report))
     if args.json:
         with open(args.json, "w") as fh:

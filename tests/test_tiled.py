@@ -156,13 +156,45 @@ def test_given_normals_are_used_as_they_are(client):
     assert_same_result(tiled, untiled, atol=1e-12)
 
 
+N_BIG, SIDE_BIG = 2_000_000, 1414.0
+
+
+def _big_cloud():
+    pts = wavy_cloud(N_BIG, SIDE_BIG, seed=6, n_bad=100)
+    return pts, radius_for(30, N_BIG / SIDE_BIG**2), (SIDE_BIG / 2, SIDE_BIG / 2, 10 * SIDE_BIG)
+
+
+def test_two_million_points_in_16_tiles_equal_the_untiled_run_at_every_tile_border(client):
+    """The full 2M-point tiled run, compared with the untiled estimator at every point within
+    two radii of a tile border (where tiling could go wrong) and 50 000 points elsewhere.
+
+    ``query`` makes the untiled estimator compute exactly the whole-cloud values at those rows
+    (neighbours from all 2M points) at a fraction of the cost; the full comparison of all 2M
+    rows is the slow test below.
+    """
+    pts, radius, viewpoint = _big_cloud()
+    tile = SIDE_BIG / 4 * 1.0001
+    tiled, report = principal_curvatures_tiled(pts, radius, tile, orientation=viewpoint,
+                                               scheduler=client, return_report=True)
+    assert report.n_tiles == 16 and len(tiled) == N_BIG
+    with np.errstate(invalid="ignore"):
+        rel = (pts[:, :2] - np.nanmin(pts[:, :2], axis=0)) / tile
+        to_border = np.abs(rel - np.round(rel)).min(axis=1) * tile
+    rng = np.random.default_rng(0)
+    rows = np.union1d(np.flatnonzero(~(to_border > 2 * radius)),  # NaN rows included
+                      rng.choice(N_BIG, 50_000, replace=False))
+    assert len(rows) > 60_000
+    untiled = meshcurv.principal_curvatures(pts, radius=radius, orientation=viewpoint,
+                                            query=rows)
+    sample = type(untiled)(radius=tiled.radius,
+                           **{k: np.asarray(getattr(tiled, k))[rows] for k in FIELDS})
+    assert_same_result(sample, untiled, atol=1e-12)
+
+
 @pytest.mark.slow
-def test_two_million_points_in_16_tiles_equal_the_untiled_run():
-    n, side = 2_000_000, 1414.0
-    pts = wavy_cloud(n, side, seed=6, n_bad=100)
-    radius = radius_for(30, n / side**2)
-    viewpoint = (side / 2, side / 2, 10 * side)
-    tiled, report = principal_curvatures_tiled(pts, radius, side / 4 * 1.0001, n_workers=2,
+def test_two_million_points_in_16_tiles_equal_the_untiled_run_everywhere():
+    pts, radius, viewpoint = _big_cloud()
+    tiled, report = principal_curvatures_tiled(pts, radius, SIDE_BIG / 4 * 1.0001, n_workers=2,
                                                orientation=viewpoint, return_report=True)
     assert report.n_tiles == 16
     untiled = meshcurv.principal_curvatures(pts, radius=radius, orientation=viewpoint)

@@ -230,10 +230,12 @@ def annotate_las(in_path, out_path, fields_for, names, chunk_size=DEFAULT_CHUNK,
     clash = [n for n in names if n.lower() in existing]
     if clash:
         raise ValueError(f"{in_path} already has dimension(s) {clash}; annotate the original file")
-    header.add_extra_dims([laspy.ExtraBytesParams(name=n, type=t, description=_DESCRIPTIONS.get(n, ""))
-                           for n, t in _field_types(names, float_type)])
+    header.add_extra_dims([
+        laspy.ExtraBytesParams(name=n, type=t, description=_DESCRIPTIONS.get(n, ""))
+        for n, t in _field_types(names, float_type)])
     folder = os.path.dirname(os.path.abspath(out_path))
-    fd, tmp = tempfile.mkstemp(prefix="." + os.path.basename(out_path) + ".", suffix=".tmp", dir=folder)
+    fd, tmp = tempfile.mkstemp(prefix="." + os.path.basename(out_path) + ".", suffix=".tmp",
+                               dir=folder)
     try:
         with os.fdopen(fd, "wb") as fh, laspy.open(
                 fh, mode="w", header=header, closefd=False,
@@ -255,7 +257,7 @@ def annotate_las(in_path, out_path, fields_for, names, chunk_size=DEFAULT_CHUNK,
 
 def write_las_curvature(in_path, out_path, result, normals=None, chunk_size=DEFAULT_CHUNK,
                         float_type="f8"):
-    """Write ``in_path`` with the curvature fields of ``result`` (one row per point) to ``out_path``.
+    """Copy ``in_path`` to ``out_path`` with the curvature fields of ``result`` (a row per point).
 
     Parameters
     ----------

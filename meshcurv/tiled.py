@@ -380,7 +380,8 @@ def _normals_task(name, work, chunk_ids, radius, grid, in_path, threads=None,
             _atomic_savez(os.path.join(work, "normals", f"{name}.npz"), own_normals=nv[own],
                           band_idx=idx[border], band_normals=nv[border], halo_idx=idx[~own],
                           halo_normals=nv[~own], halo_owner=grid.own_keys(xyz[~own]))
-            # partial sums for the outward decision of a group of tiles: sum p.n, sum n, sum p, count
+            # partial sums for the outward decision of a group of tiles:
+            # sum p.n, sum n, sum p, count
             ok = own & np.isfinite(nv).all(axis=1)
             p, n = xyz[ok], nv[ok]
             stats = {"orient": [float(np.einsum("ij,ij->", p, n)), *n.sum(axis=0).tolist(),
@@ -401,7 +402,8 @@ def _tile_flips(work, names):
     driver's memory is bounded by a few tiles' borders.
     """
     from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import breadth_first_order, connected_components, minimum_spanning_tree
+    from scipy.sparse.csgraph import (breadth_first_order, connected_components,
+                                      minimum_spanning_tree)
 
     if not names:
         return {}

@@ -14,8 +14,9 @@ from .neighborhoods import (KringWork, ball_grid, ball_neighbors, default_radius
 
 __all__ = ["CurvatureResult", "principal_curvatures"]
 
-# Query points per call into the kernels: bounds the memory of the neighbour lists.
-_BLOCK = 65536
+# Query points per call into the kernels: bounds the memory of the neighbour lists (about
+# 0.8 kB per query point at 100 neighbours) at no measurable cost in speed.
+_BLOCK = 16384
 
 # Noise level (RMS height residual of the local cubic fit, as a fraction of the radius) at
 # which weighting="auto" mixes equal and distance weights half and half. Measured: clean

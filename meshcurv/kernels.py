@@ -760,6 +760,8 @@ def propagate_signs(order, predecessors, normals):
 def edge_adjacency_csr(faces, n):
     """Undirected edge graph of a triangle mesh as CSR ``(indptr, indices)``, sorted, unique.
 
+    ``indptr`` is int64, ``indices`` int32 (vertex numbers below 2**31; half the memory).
+
     Every face contributes its three edges in both directions (self-loops of degenerate faces
     are dropped); each vertex's row is then sorted and deduplicated in place.
     """
@@ -775,7 +777,7 @@ def edge_adjacency_csr(faces, n):
     for i in range(n):
         start[i + 1] += start[i]
     fill = start[:n].copy()
-    idx = np.empty(start[n], dtype=np.int64)
+    idx = np.empty(start[n], dtype=np.int32)
     for f in range(m):
         for c in range(3):
             a = faces[f, c]
@@ -854,10 +856,10 @@ def kring_ball_csr_fast(adj_ptr, adj_idx, points, query, radius, stamp, queue, t
     Same output as :func:`kring_ball_csr` (query vertex excluded, breadth-first order), at about
     half the cost: each thread streams its results into an int32 scratch sized from a sample
     of 64 queries, copied once; a thread whose stream overflows searches its range again.
-    ``stamp`` (threads, n) int64 and ``queue`` (threads, n) int32 are reusable work arrays
-    (``stamp`` starts at -1); ``tag0`` is an offset that makes this call's stamps unique: pass
-    a different ``tag0`` per call (e.g. the position of the block) and ``tag0 + len(query)``
-    below 2**60.
+    ``stamp`` (threads, n) int32 or int64 and ``queue`` (threads, n) int32 are reusable work
+    arrays (``stamp`` starts at -1); ``tag0`` is an offset that makes this call's stamps
+    unique: pass a different ``tag0`` per call (e.g. the position of the block), with
+    ``3 * (tag0 + len(query)) + 2`` representable in ``stamp``'s type.
     """
     m = query.shape[0]
     r2max = radius * radius

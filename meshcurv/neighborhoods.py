@@ -26,7 +26,8 @@ def edge_adjacency(faces, n_vertices):
     n_vertices : int
 
     Degenerate faces contribute only their distinct edges; non-manifold edges are fine.
-    Each row is sorted and holds every neighbour once.
+    Each row is sorted and holds every neighbour once. ``indptr`` (n + 1,) int64, ``indices``
+    int32.
     """
     faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
     return kernels.edge_adjacency_csr(faces, int(n_vertices))
@@ -35,15 +36,25 @@ def edge_adjacency(faces, n_vertices):
 class KringWork:
     """Reusable work arrays of :func:`kring_neighbors` for repeated calls on one mesh.
 
-    ``threads x n`` visited stamps and queues (12 bytes per vertex and thread), allocated once
-    instead of per call; each call takes fresh stamp values from ``next_tag``.
+    ``threads x n`` int32 visited stamps and queues (8 bytes per vertex and thread), allocated
+    once instead of per call; each call takes fresh stamp values from ``next_tag`` (three per
+    query vertex), and the stamps are cleared when those would pass ``2**31``.
     """
 
     def __init__(self, n_vertices, n_threads=None):
         t = numba.get_num_threads() if n_threads is None else int(n_threads)
-        self.stamp = np.full((max(1, t), n_vertices), -1, dtype=np.int64)
+        self.stamp = np.full((max(1, t), n_vertices), -1, dtype=np.int32)
         self.queue = np.empty((max(1, t), n_vertices), dtype=np.int32)
         self.next_tag = 0
+
+    def take_tags(self, count):
+        """First of ``count`` fresh query tags (stamp values ``3 * tag + {0, 1, 2}``)."""
+        if 3 * (self.next_tag + count) + 3 >= 2 ** 31:
+            self.stamp.fill(-1)
+            self.next_tag = 0
+        tag0 = self.next_tag
+        self.next_tag += count
+        return tag0
 
 
 def kring_neighbors(points, adjacency, radius, query, work=None):
@@ -70,8 +81,7 @@ def kring_neighbors(points, adjacency, radius, query, work=None):
     query = np.ascontiguousarray(query, dtype=np.int64)
     if work is None:
         work = KringWork(len(points))
-    tag0 = work.next_tag
-    work.next_tag += len(query)
+    tag0 = work.take_tags(len(query))
     return kernels.kring_ball_csr_fast(adjacency[0], adjacency[1], points, query, float(radius),
                                        work.stamp, work.queue, tag0)
 

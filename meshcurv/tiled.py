@@ -142,6 +142,8 @@ class TiledReport:
         Python/numpy allocations of the task, and with ``orientation="mst"`` the same for the
         normal pass prefixed ``normals_``}
     flips : dict tile name -> +1/-1 applied to the tile's MST normals (``orientation="mst"``)
+    stage_seconds : dict stage -> wall time: "start" (cluster), "scatter", "normals", "tiles",
+        "write"
     seconds : wall time of the whole run; out_path : str or None
     """
 
@@ -154,6 +156,7 @@ class TiledReport:
     skipped: list = field(default_factory=list)
     tile_stats: dict = field(default_factory=dict)
     flips: dict = field(default_factory=dict)
+    stage_seconds: dict = field(default_factory=dict)
     seconds: float = 0.0
     out_path: str = None
 
@@ -644,9 +647,12 @@ def _process(client, threads, work, grid, radius, orientation, options, chunk_jo
     summaries = {int(f[1:7]): _read_json(os.path.join(work, "chunks", f))
                  for f in os.listdir(os.path.join(work, "chunks")) if f.endswith(".json")}
     todo = {f"c{cid:06d}": job for cid, job in chunk_jobs.items() if cid not in summaries}
+    t0 = time.perf_counter()
     if todo:
         done = _run(client, todo, "scatter", "chunk", in_path, progress)
         summaries.update({int(k[1:]): v for k, v in done.items()})
+    report.stage_seconds["scatter"] = report.stage_seconds.get("scatter", 0.0) + (
+        time.perf_counter() - t0)
     tiles = {}
     for cid in sorted(summaries):
         for name in summaries[cid]:
@@ -656,6 +662,7 @@ def _process(client, threads, work, grid, radius, orientation, options, chunk_jo
     task_kw = {"threads": threads, "measure_memory": measure_memory}
 
     flips = {}
+    t0 = time.perf_counter()
     if isinstance(orientation, str) and not has_normals:
         normal_stats = {}
         jobs = {}
@@ -669,7 +676,9 @@ def _process(client, threads, work, grid, radius, orientation, options, chunk_jo
         normal_stats.update(_run(client, jobs, "normals", "tile", in_path, progress))
         flips = _tile_flips(work, names)
         report.flips = flips
+        report.stage_seconds["normals"] = time.perf_counter() - t0
 
+    t0 = time.perf_counter()
     jobs = {}
     for name in names:
         marker = os.path.join(work, "results", name, "done.json")
@@ -681,6 +690,7 @@ def _process(client, threads, work, grid, radius, orientation, options, chunk_jo
                                             in_path), dict(task_kw, flip=flips.get(name)))
     report.computed = sorted(jobs)
     report.tile_stats.update(_run(client, jobs, "tiles", "tile", in_path, progress))
+    report.stage_seconds["tiles"] = time.perf_counter() - t0
     if flips:
         for name in names:
             report.tile_stats[name].update(
@@ -780,7 +790,9 @@ def annotate_tiled(in_path, out_path, radius=None, tile_size=None, *, orientatio
                                            work), {})
                   for c, s in enumerate(range(0, n_points, chunk_size))}
     try:
+        t_start = time.perf_counter()
         with _dask_client(scheduler, n_workers) as (client, threads):
+            report.stage_seconds["start"] = time.perf_counter() - t_start
             own_tiles = _process(client, threads, work, grid, radius, orientation, options,
                                  chunk_jobs, in_path, progress, measure_memory, report,
                                  has_normals)
@@ -800,8 +812,10 @@ def annotate_tiled(in_path, out_path, radius=None, tile_size=None, *, orientatio
             kept.append(res)
         return las.result_fields(res, normals=write_normals, float_type=float_type)
 
+    t_write = time.perf_counter()
     las.annotate_las(in_path, out_path, fields_for, names, chunk_size=chunk_size,
                      float_type=float_type)
+    report.stage_seconds["write"] = time.perf_counter() - t_write
     if not keep_work:
         shutil.rmtree(work, ignore_errors=True)
     report.seconds = time.perf_counter() - t0
@@ -870,15 +884,21 @@ def principal_curvatures_tiled(vertices, radius, tile_size, normals=None, *, ori
         # an array cannot be recognised again: always start afresh
         _prepare_work(work, {"input": "memory", "n": n, "token": time.time_ns(),
                              **_options_manifest(radius, grid, orientation, options, chunk_size)})
+        t_scatter = time.perf_counter()
         for c, s in enumerate(range(0, n, chunk_size)):
             _scatter(v[s:s + chunk_size], None if nv is None else nv[s:s + chunk_size], s, c,
                      grid, work)
+        report.stage_seconds["scatter"] = time.perf_counter() - t_scatter
+        t_start = time.perf_counter()
         with _dask_client(scheduler, n_workers) as (client, threads):
+            report.stage_seconds["start"] = time.perf_counter() - t_start
             own_tiles = _process(client, threads, work, grid, radius, orientation, options, {},
                                  "<array>", progress, measure_memory, report, nv is not None)
+        t_write = time.perf_counter()
         parts = [_as_result(_gather(work, own_tiles.get(c, []), c, s, min(chunk_size, n - s)),
                             radius)
                  for c, s in enumerate(range(0, n, chunk_size))]
     res = _concat_results(parts, radius)
+    report.stage_seconds["write"] = time.perf_counter() - t_write
     report.seconds = time.perf_counter() - t0
     return (res, report) if return_report else res

@@ -15,7 +15,7 @@ statistics between methods).
 Usage::
 
     python scripts/compare_meshlab.py            # full run -> docs/comparison.md, docs/*.png
-    python scripts/compare_meshlab.py --quick    # smaller meshes, < 2 minutes
+    python scripts/compare_meshlab.py --quick    # smaller meshes, about a minute of CPU time
     python scripts/compare_meshlab.py --smallest --out /tmp/cmp   # the test-suite configuration
 
 Sign and label normalisation (all methods are brought to meshcurv's convention: outward normal,
@@ -30,8 +30,8 @@ convex positive, k1 >= k2); measured on a sphere and a torus with outward-wound 
   ("Mean" is not (k1 + k2) / 2 and is not used).
 - Each value needs its own filter call (MeshLab exposes k1 and k2 only through vertex quality),
   so every MeshLab method runs twice per mesh; the reported time is that of one call.
-- Taubin returned 0 for both curvatures at vertex 0 of the icosphere (a valence-5 vertex; the
-  other eleven are fine), which sets its max error on the sphere to 1.0; left as measured.
+- Taubin returned 0 for both curvatures at vertex 0 of the 2562-vertex icosphere (a valence-5
+  vertex; the other eleven are fine), which sets its max error there to 1.0; left as measured.
 - APSS aborts the process (SIGABRT) on some clean inputs (seen on the 2562-vertex icosphere,
   not on the 10242-vertex one); the child process turns that into a "crash (signal 6)" row.
 - Radius: SDQF takes ``scale=PureValue(radius)``. APSS takes a multiple ``filterscale`` of a
@@ -603,6 +603,10 @@ def _fmt(x, digits=4):
     return f"{x:.{digits}f}" if abs(x) < 1000 else f"{x:.3g}"
 
 
+def _pct(x):
+    return "-" if not np.isfinite(x) else f"{x * 100:.1f} %"
+
+
 def table(rows):
     """Markdown table of ground-truth error rows."""
     head = ("| surface | noise | method | radius | mean\\|Δk1\\| | max\\|Δk1\\| | mean\\|Δk2\\| "
@@ -792,8 +796,8 @@ def write_report(path, mode, rows, real, pictures, seconds, study=(), radii=()):
             for a in rr["rows"]:
                 m = a["method"]
                 lines.append(f"| {m} | {_fmt(a['dk1'], 3)} | {_fmt(a['dk2'], 3)} "
-                             f"| {_fmt(a['rho_h'], 3)} | {_fmt(a['sign_h'] * 100, 1)} % "
-                             f"| {_fmt(a['covered'] * 100, 1)} % | {_fmt(rr['times'][m], 2)} "
+                             f"| {_fmt(a['rho_h'], 3)} | {_pct(a['sign_h'])} "
+                             f"| {_pct(a['covered'])} | {_fmt(rr['times'][m], 2)} "
                              f"| {rr['status'][m]} |")
             lines += [f"| meshcurv | - | - | - | - | - | {_fmt(rr['times']['meshcurv'], 2)} | ok |", ""]
     if pictures:
@@ -807,12 +811,17 @@ def main(argv=None):
     g = ap.add_mutually_exclusive_group()
     g.add_argument("--quick", action="store_true", help="smaller meshes, under 2 minutes")
     g.add_argument("--smallest", action="store_true", help="one sphere, two noise levels (tests)")
-    ap.add_argument("--out", default=os.path.join(ROOT, "docs"), help="output folder")
+    ap.add_argument("--out", default=None,
+                    help="output folder (default: docs/ for the full run, a folder in the "
+                         "system's temporary directory for --quick and --smallest)")
     ap.add_argument("--timeout", type=float, default=None, help="seconds per MeshLab call")
     ap.add_argument("--no-pictures", action="store_true")
     args = ap.parse_args(argv)
     mode = "quick" if args.quick else "smallest" if args.smallest else "full"
     timeout = args.timeout or {"smallest": 60, "quick": 60, "full": 300}[mode]
+    if args.out is None:
+        args.out = (os.path.join(ROOT, "docs") if mode == "full" else
+                    os.path.join(tempfile.gettempdir(), f"meshcurv_comparison_{mode}"))
     os.makedirs(args.out, exist_ok=True)
     t0 = time.perf_counter()
     warm_up()

@@ -168,9 +168,12 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
     normals : (n, 3) float, optional
         Outward normals, used as given (normalised). Default: estimated, see
         ``normal_estimation``.
-    radius : float, optional
+    radius : float or "auto", optional
         Neighbourhood radius, model units. Default: the radius whose ball holds about 100
         points (:func:`meshcurv.neighborhoods.default_radius`; ~5 mean edge lengths).
+        "auto": one radius per mesh that balances the noise measured on the data against the
+        circle model's bias (:func:`meshcurv.autoradius.auto_radius`; a few pilot runs on a
+        sample of vertices). The radius used is ``result.radius``.
     n_directions : int, default 8
         Planes through the normal, i.e. ``2 * n_directions`` circle fits per vertex.
     neighborhood : {"auto", "kring", "ball"}
@@ -240,7 +243,7 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
 
     Examples
     --------
-    >>> import meshcurv, trimesh
+    >>> import meshcurv, numpy as np, trimesh
     >>> sphere = trimesh.creation.icosphere(subdivisions=4, radius=2.0)
     >>> res = meshcurv.principal_curvatures(sphere, radius=0.4)
     >>> bool(abs(np.nanmedian(res.k1) - 0.5) < 1e-3)
@@ -273,6 +276,13 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
             raise ValueError(f"query indices must lie in 0..{n - 1}")
     if radius is None:
         radius = default_radius(v)
+    elif isinstance(radius, str):
+        if radius != "auto":
+            raise ValueError(f"radius must be a number of model units, None or 'auto', got {radius!r}")
+        from .autoradius import auto_radius     # it calls this function for its pilot runs
+
+        radius = auto_radius(v, f, normals=given_normals, weighting=weighting, slab=slab,
+                             n_directions=n_directions, neighborhood=neighborhood)
     radius = float(radius)
     if not (np.isfinite(radius) and radius > 0) and n > 1:
         if np.isfinite(v).all(axis=1).sum() > 1:

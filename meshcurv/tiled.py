@@ -552,22 +552,28 @@ def _as_result(arrays, radius):
 # ----------------------------------------------------------------------------- the driver
 
 @contextlib.contextmanager
-def _dask_client(scheduler, n_workers):
+def _dask_client(scheduler, n_workers, threads_per_task=None):
     """(client, numba threads per task): the given Client, one connected to an address, or a
-    LocalCluster of ``n_workers`` one-thread processes, closed on exit."""
+    LocalCluster of ``n_workers`` one-thread processes, closed on exit.
+
+    Threads per task: ``threads_per_task`` if given; for the LocalCluster the cores shared out
+    among its workers; else None (numba's default, all cores of the worker's machine).
+    """
     from distributed import Client, LocalCluster
 
+    if threads_per_task is not None and int(threads_per_task) < 1:
+        raise ValueError(f"threads_per_task must be at least 1, got {threads_per_task}")
     if scheduler is not None and not isinstance(scheduler, str):
-        yield scheduler, None
+        yield scheduler, threads_per_task
         return
     if isinstance(scheduler, str):
         with Client(scheduler) as client:
-            yield client, None
+            yield client, threads_per_task
         return
     n_workers = int(n_workers or min(os.cpu_count() or 1, 8))
     with LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
                       dashboard_address=None) as cluster, Client(cluster) as client:
-        yield client, max(1, (os.cpu_count() or 1) // n_workers)
+        yield client, threads_per_task or max(1, (os.cpu_count() or 1) // n_workers)
 
 
 def _run(client, jobs, desc, unit, in_path, progress):
@@ -707,7 +713,7 @@ def _default_tile_size(n_points, extent, target=1_000_000):
 def annotate_tiled(in_path, out_path, radius=None, tile_size=None, *, orientation="mst",
                    scheduler=None, n_workers=None, chunk_size=500_000, work_dir=None,
                    keep_work=False, progress=True, float_type="f8", measure_memory=False,
-                   return_result=False, **options):
+                   return_result=False, threads_per_task=None, **options):
     """Annotate a LAS/LAZ file with curvature fields, tile by tile on Dask; output in input order.
 
     Parameters
@@ -733,6 +739,9 @@ def annotate_tiled(in_path, out_path, radius=None, tile_size=None, *, orientatio
     measure_memory : bool, also trace each tile task's peak Python/numpy allocations
     return_result : bool, also return the CurvatureResult (one row per point; needs memory for
         the whole cloud, meant for checks on small files)
+    threads_per_task : int, numba threads of a tile task. Default: the cores shared out among
+        the LocalCluster's workers; with ``scheduler`` given, numba's default (all cores of
+        the worker's machine) - set it to cores / worker threads on a shared machine
     **options : passed to :func:`meshcurv.principal_curvatures` (n_directions, slab, ...)
 
     Returns
@@ -791,7 +800,7 @@ def annotate_tiled(in_path, out_path, radius=None, tile_size=None, *, orientatio
                   for c, s in enumerate(range(0, n_points, chunk_size))}
     try:
         t_start = time.perf_counter()
-        with _dask_client(scheduler, n_workers) as (client, threads):
+        with _dask_client(scheduler, n_workers, threads_per_task) as (client, threads):
             report.stage_seconds["start"] = time.perf_counter() - t_start
             own_tiles = _process(client, threads, work, grid, radius, orientation, options,
                                  chunk_jobs, in_path, progress, measure_memory, report,
@@ -834,7 +843,7 @@ def _concat_results(parts, radius):
 def principal_curvatures_tiled(vertices, radius, tile_size, normals=None, *, orientation="mst",
                                scheduler=None, n_workers=None, chunk_size=500_000,
                                work_dir=None, progress=False, measure_memory=False,
-                               return_report=False, **options):
+                               return_report=False, threads_per_task=None, **options):
     """:func:`meshcurv.principal_curvatures` of an in-memory point cloud, computed in tiles on Dask.
 
     The driver cuts the cloud into tile + halo pieces in a work folder (which workers must see);
@@ -846,8 +855,8 @@ def principal_curvatures_tiled(vertices, radius, tile_size, normals=None, *, ori
     ----------
     vertices : (n, 3) float, model units; normals : (n, 3) float, optional
     radius : float, model units; tile_size : float, model units (x, y side of a tile)
-    orientation, scheduler, n_workers, progress, measure_memory, options : as in
-        :func:`annotate_tiled`
+    orientation, scheduler, n_workers, progress, measure_memory, threads_per_task, options :
+        as in :func:`annotate_tiled`
     work_dir : str, optional; default a temporary folder, removed afterwards
     return_report : bool, also return the :class:`TiledReport`
 
@@ -890,7 +899,7 @@ def principal_curvatures_tiled(vertices, radius, tile_size, normals=None, *, ori
                      grid, work)
         report.stage_seconds["scatter"] = time.perf_counter() - t_scatter
         t_start = time.perf_counter()
-        with _dask_client(scheduler, n_workers) as (client, threads):
+        with _dask_client(scheduler, n_workers, threads_per_task) as (client, threads):
             report.stage_seconds["start"] = time.perf_counter() - t_start
             own_tiles = _process(client, threads, work, grid, radius, orientation, options, {},
                                  "<array>", progress, measure_memory, report, nv is not None)

@@ -18,13 +18,18 @@ FIELDS = ("k1", "k2", "d1", "d2", "normals", "valid", "n_neighbors", "n_samples"
           "noise")
 
 
+def on(client):
+    """Run on the shared cluster, one numba thread per task (two workers on two cores)."""
+    return {"scheduler": client, "threads_per_task": 1}
+
+
 @pytest.fixture(scope="module")
 def client():
     """Two single-thread worker processes, as on a 2-core machine; closed after the module."""
     from distributed import Client, LocalCluster
 
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
-                      env={"NUMBA_NUM_THREADS": "1"}) as cluster, Client(cluster) as c:
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                      dashboard_address=None) as cluster, Client(cluster) as c:
         yield c
 
 
@@ -90,8 +95,8 @@ def default_run(client):
     radius = radius_for(30, N_DEFAULT / SIDE_DEFAULT**2)
     viewpoint = (SIDE_DEFAULT / 2, SIDE_DEFAULT / 2, 10 * SIDE_DEFAULT)
     tiled, report = principal_curvatures_tiled(pts, radius, TILE, orientation=viewpoint,
-                                               scheduler=client, chunk_size=25_000,
-                                               measure_memory=True, return_report=True)
+                                               chunk_size=25_000, measure_memory=True,
+                                               return_report=True, **on(client))
     untiled = meshcurv.principal_curvatures(pts, radius=radius, orientation=viewpoint)
     return pts, radius, tiled, untiled, report
 
@@ -113,8 +118,8 @@ def test_tile_task_memory_is_bounded_by_the_tile_not_the_cloud(client, default_r
     pts = wavy_cloud(n_small, side_small, seed=1)
     radius = radius_for(30, n_small / side_small**2)
     _, small_report = principal_curvatures_tiled(
-        pts, radius, TILE, orientation=(0.0, 0.0, 5000.0), scheduler=client, chunk_size=25_000,
-        measure_memory=True, return_report=True)
+        pts, radius, TILE, orientation=(0.0, 0.0, 5000.0), chunk_size=25_000,
+        measure_memory=True, return_report=True, **on(client))
     assert small_report.n_tiles == 4
 
     def peak(report, key):
@@ -135,8 +140,8 @@ def test_tile_task_memory_is_bounded_by_the_tile_not_the_cloud(client, default_r
 def test_mst_orientation_agrees_across_tiles_and_with_the_untiled_run(client):
     pts = wavy_cloud(24_000, 155.0, seed=4)
     radius = radius_for(30, 24_000 / 155.0**2)
-    tiled, report = principal_curvatures_tiled(pts, radius, 38.76, scheduler=client,
-                                               orientation="mst", return_report=True)
+    tiled, report = principal_curvatures_tiled(pts, radius, 38.76, orientation="mst",
+                                               return_report=True, **on(client))
     untiled = meshcurv.principal_curvatures(pts, radius=radius, orientation="mst")
     assert report.n_tiles == 16
     # the tiles' own propagations disagree (each picks its side alone): some had to be flipped
@@ -153,7 +158,7 @@ def test_given_normals_are_used_as_they_are(client):
     pts = wavy_cloud(12_000, 150.0, seed=5)
     radius = radius_for(30, 12_000 / 150.0**2)
     normals = np.tile([0.0, 0.0, 1.0], (len(pts), 1))
-    tiled = principal_curvatures_tiled(pts, radius, 40.0, normals=normals, scheduler=client)
+    tiled = principal_curvatures_tiled(pts, radius, 40.0, normals=normals, **on(client))
     untiled = meshcurv.principal_curvatures(pts, normals=normals, radius=radius)
     assert_same_result(tiled, untiled, atol=1e-12)
 
@@ -177,7 +182,7 @@ def test_two_million_points_in_16_tiles_equal_the_untiled_run_at_every_tile_bord
     pts, radius, viewpoint = _big_cloud()
     tile = SIDE_BIG / 4 * 1.0001
     tiled, report = principal_curvatures_tiled(pts, radius, tile, orientation=viewpoint,
-                                               scheduler=client, return_report=True)
+                                               return_report=True, **on(client))
     assert report.n_tiles == 16 and len(tiled) == N_BIG
     with np.errstate(invalid="ignore"):
         rel = (pts[:, :2] - np.nanmin(pts[:, :2], axis=0)) / tile
@@ -217,8 +222,8 @@ def test_annotate_laz_in_tiles_equals_untiled_and_keeps_input_dims(client, laz_i
     path, xyz, radius = laz_input
     out = str(tmp_path / "scan_curv.laz")
     viewpoint = (60.0, 60.0, 1000.0)
-    report = annotate_tiled(path, out, radius, 30.0, orientation=viewpoint, scheduler=client,
-                            chunk_size=4000, progress=False)
+    report = annotate_tiled(path, out, radius, 30.0, orientation=viewpoint, chunk_size=4000,
+                            progress=False, **on(client))
     assert report.n_tiles == 16 and len(report.computed) == 16
     untiled = meshcurv.principal_curvatures(xyz, radius=radius, orientation=viewpoint)
     got, src = laspy.read(out), laspy.read(path)
@@ -237,7 +242,7 @@ def test_failed_tile_is_named_leaves_no_output_and_rerun_resumes(client, laz_inp
     path, xyz, radius = laz_input
     out = str(tmp_path / "scan_curv.laz")
     work = str(tmp_path / "work")
-    kw = dict(orientation=(60.0, 60.0, 1000.0), scheduler=client, chunk_size=4000,
+    kw = dict(orientation=(60.0, 60.0, 1000.0), chunk_size=4000, **on(client),
               progress=False, work_dir=work)
     annotate_tiled(path, out, radius, 30.0, keep_work=True, **kw)
     reference = laspy.read(out)
@@ -290,7 +295,7 @@ def test_dead_worker_is_reported_with_its_tile_and_no_output(client, laz_input, 
     try:
         with pytest.raises(TileError, match=r"tile t_-?\d+_-?\d+ of .*scan\.laz.*KilledWorker"):
             annotate_tiled(path, out, radius, 30.0, orientation=(60.0, 60.0, 1000.0),
-                           scheduler=client, chunk_size=4000, progress=False)
+                           chunk_size=4000, progress=False, **on(client))
     finally:
         client.run_on_scheduler(_set_allowed_failures, count=previous)
         client.restart()  # fresh worker processes without the patched task
@@ -307,8 +312,7 @@ def test_truncated_laz_is_named_and_leaves_nothing(client, laz_input, tmp_path):
         fh.write(data[: len(data) // 2])
     out = str(tmp_path / "cut_curv.laz")
     with pytest.raises(las.LasReadError, match="cut.laz"):
-        annotate_tiled(bad, out, radius, 30.0, scheduler=client, chunk_size=4000,
-                       progress=False)
+        annotate_tiled(bad, out, radius, 30.0, chunk_size=4000, progress=False, **on(client))
     assert sorted(os.listdir(tmp_path)) == ["cut.laz"]
 
 

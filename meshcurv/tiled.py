@@ -774,6 +774,9 @@ def annotate_tiled(in_path, out_path, radius=None, tile_size=None, *, orientatio
         n_points = int(header.point_count)
         mins, maxs = np.asarray(header.mins, float), np.asarray(header.maxs, float)
         has_normals = las._normal_dims(header.point_format) is not None
+    if isinstance(radius, str):
+        raise ValueError(f"tiled runs need a radius in model units or None, got {radius!r} "
+                         "(a data-driven radius needs the whole cloud)")
     if radius is None:
         from .neighborhoods import default_radius
 
@@ -880,6 +883,8 @@ def principal_curvatures_tiled(vertices, radius, tile_size, normals=None, *, ori
             raise ValueError(f"normals must have the shape of vertices {v.shape}, got {nv.shape}")
     orientation = _check_orientation(orientation)
     _check_options(options)
+    if isinstance(radius, str):
+        raise ValueError(f"tiled runs need a radius in model units, got {radius!r}")
     radius, tile_size, chunk_size = float(radius), float(tile_size), int(chunk_size)
     if not (np.isfinite(radius) and radius > 0 and np.isfinite(tile_size) and tile_size > 0):
         raise ValueError("radius and tile_size must be positive numbers of model units")

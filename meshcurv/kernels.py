@@ -114,20 +114,22 @@ def _smallest_eigvec_sym3(a11, a12, a13, a22, a23, a33, out):
 
 
 @njit(cache=True)
-def _tangent_frame(points, nbr, lo, hi, x, n, r2max, tu, tv):
+def _tangent_frame(points, nbr, lo, hi, x, n, r2max, tu, tv, rank):
     """Tangent frame (tu, tv, n) that rotates with the data.
 
     tu is the tangential part of the offset to the neighbour of lowest index lying at least
     30 degrees off the normal. The choice depends on neither the order of the neighbour list
     nor the coordinates' position, scale or orientation, so the frame - and with it the
     sampling planes - is equivariant under rotation, translation and scaling. Falls back to a
-    fixed frame if there is no such neighbour.
+    fixed frame if there is no such neighbour. ``rank`` (or None: the row itself) is the index
+    of each row of ``points``, for points stored in another order than the input's.
     """
     found = False
     best = -1
     for j in range(lo, hi):
         k = nbr[j]
-        if found and k >= best:
+        key = k if rank is None else rank[k]
+        if found and key >= best:
             continue
         qx = points[k, 0] - x[0]
         qy = points[k, 1] - x[1]
@@ -145,7 +147,7 @@ def _tangent_frame(points, nbr, lo, hi, x, n, r2max, tu, tv):
             tu[1] = uy * s
             tu[2] = uz * s
             found = True
-            best = k
+            best = key
     if not found:
         # any unit vector orthogonal to n
         if abs(n[0]) < 0.9:
@@ -194,21 +196,21 @@ def _solve_sym(m, rhs, npar, sol):
 
 
 @njit(cache=True)
-def _sample_design(acc, k, corrected, theta):
+def _sample_design(acc, k, corrected, cos2t, sin2t):
     """Regressors (cos 2theta, sin 2theta) of one circle-fit sample for the Euler model.
 
-    Nominally the sample's plane direction theta. With ``corrected`` they are the cos/sin 2phi
+    Nominally (cos 2theta, sin 2theta) of the sample's plane direction theta. With ``corrected`` they are the cos/sin 2phi
     of the half-set's own points, averaged with the weights the circle fit gives them: to first
     order in the heights, the fitted curvature is sum_p w_p k(phi_p) / sum_p w_p with
     w_p = r2_p (r2_p - mean r2), so a slab of finite width samples a known blend of directions
     rather than theta alone, and the Euler model can be fitted to that blend exactly.
     """
     if not corrected:
-        return math.cos(2.0 * theta), math.sin(2.0 * theta)
+        return cos2t, sin2t
     rbar = acc[k, _R] / acc[k, _N]
     den = acc[k, _RR] - rbar * acc[k, _R]
     if den <= 0.0:
-        return math.cos(2.0 * theta), math.sin(2.0 * theta)
+        return cos2t, sin2t
     mc = (acc[k, _RRC] - rbar * acc[k, _RC]) / den
     ms = (acc[k, _RRS] - rbar * acc[k, _RS]) / den
     return mc, ms
@@ -279,7 +281,8 @@ def _model(rows, s, npar, sol):
 @njit(cache=True)
 def _estimate_one(points, nbr, lo, hi, x, n, radius, ndir, slab, min_points, min_spread,
                   beta, unit_norm, corrected, half_frequency, robust,
-                  ca, sa, acc, kappa, rows, active, scratch, mat, rhs, sol, ev, tu, tv, res):
+                  ca, sa, dirs, acc, kappa, rows, active, scratch, mat, rhs, sol, ev, tu, tv,
+                  res, rank):
     """Circle fits in 2*ndir half-sets around one point, then the Euler model fit.
 
     Writes (k1, k2, theta1, n_used_samples, residual_rms, n_neighbours) into ``res`` and the
@@ -297,7 +300,7 @@ def _estimate_one(points, nbr, lo, hi, x, n, radius, ndir, slab, min_points, min
     res[5] = 0.0
     inv_r = 1.0 / radius
     r2max = radius * radius
-    _tangent_frame(points, nbr, lo, hi, x, n, r2max, tu, tv)
+    _tangent_frame(points, nbr, lo, hi, x, n, r2max, tu, tv, rank)
     n_nbr = 0
     for j in range(lo, hi):
         kk = nbr[j]
@@ -356,14 +359,13 @@ def _estimate_one(points, nbr, lo, hi, x, n, radius, ndir, slab, min_points, min
             kap, _ = _circle_fit(acc, k, unit_norm, ev)
             if not np.isfinite(kap):
                 continue
-            theta = math.atan2(sa[i], ca[i]) + side * math.pi
             kappa[m] = kap
-            dc, ds = _sample_design(acc, k, corrected, theta)
+            dc, ds = _sample_design(acc, k, corrected, dirs[k, 2], dirs[k, 3])
             rows[m, 0] = 1.0
             rows[m, 1] = dc
             rows[m, 2] = ds
-            rows[m, 3] = math.cos(theta)
-            rows[m, 4] = math.sin(theta)
+            rows[m, 3] = dirs[k, 0]
+            rows[m, 4] = dirs[k, 1]
             active[m] = 1.0
             m += 1
             seen = True
@@ -411,7 +413,7 @@ def _estimate_one(points, nbr, lo, hi, x, n, radius, ndir, slab, min_points, min
 @njit(parallel=True, cache=True)
 def curvature_cga(points, query_points, query_normals, indptr, indices, radius, ndir, slab,
                   min_points, min_spread, blend, unit_norm, corrected, half_frequency,
-                  robust, k1, k2, d1, d2, n_samples, residual, n_neighbors):
+                  robust, k1, k2, d1, d2, n_samples, residual, n_neighbors, rank=None):
     """Fused CGA circle-fit estimator over query points with CSR neighbour lists.
 
     Parameters
@@ -428,6 +430,9 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
     corrected, half_frequency, robust : bool, see :func:`meshcurv.principal_curvatures`
     Outputs k1, k2 (m,), d1, d2 (m, 3), n_samples, residual, n_neighbors (m,) are written in
     place; NaN where no estimate is possible.
+    rank : (n,) int64, optional, the input index of each row of ``points`` when they are stored
+        in another order (e.g. a grid's sorted copy, for memory locality): the tangent frame's
+        lowest-index rule then picks the same neighbour as on the input.
     """
     m = query_points.shape[0]
     nh = 2 * ndir
@@ -438,6 +443,15 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
         # boundary because of the frame or of a regular grid, so rounding cannot flip it
         ca[i] = math.cos((i + PLANE_OFFSET) * math.pi / ndir)
         sa[i] = math.sin((i + PLANE_OFFSET) * math.pi / ndir)
+    # (cos, sin) of theta and 2 theta of each half-set's direction theta, once for all points
+    dirs = np.empty((nh, 4))
+    for i in range(ndir):
+        for side in range(2):
+            theta = math.atan2(sa[i], ca[i]) + side * math.pi
+            dirs[i + side * ndir, 0] = math.cos(theta)
+            dirs[i + side * ndir, 1] = math.sin(theta)
+            dirs[i + side * ndir, 2] = math.cos(2.0 * theta)
+            dirs[i + side * ndir, 3] = math.sin(2.0 * theta)
     nchunks = (m + CHUNK - 1) // CHUNK
     for c in prange(nchunks):
         acc = np.empty((nh, N_ACC))
@@ -464,8 +478,8 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
                     n[a] /= nn
                 _estimate_one(points, indices, indptr[q], indptr[q + 1], x, n, radius, ndir,
                               slab, min_points, min_spread, blend[q], unit_norm, corrected,
-                              half_frequency, robust, ca, sa, acc, kappa, rows, active, scratch,
-                              mat, rhs, sol, ev, tu, tv, res)
+                              half_frequency, robust, ca, sa, dirs, acc, kappa, rows, active,
+                              scratch, mat, rhs, sol, ev, tu, tv, res, rank)
             else:
                 for a in range(6):
                     res[a] = np.nan
@@ -527,6 +541,7 @@ def local_jet(points, query_points, normals, indptr, indices, radius, refine, no
         rhs = np.empty(10)
         sol = np.empty(10)
         row = np.empty(10)
+        tri = np.empty(55)
         for q in range(c * CHUNK, min(m, (c + 1) * CHUNK)):
             noise[q] = np.nan
             n0 = normals[q, 0]
@@ -549,11 +564,12 @@ def local_jet(points, query_points, normals, indptr, indices, radius, refine, no
             b0 = n1 * t2 - n2 * t1
             b1 = n2 * t0 - n0 * t2
             b2 = n0 * t1 - n1 * t0
+            # lower triangle of the normal matrix, packed row by row
             for a in range(10):
                 rhs[a] = 0.0
-                for cc in range(10):
-                    mat[a, cc] = 0.0
-            mat[5, 5] = 1.0          # x itself: u = v = h = 0, weight 1
+            for a in range(55):
+                tri[a] = 0.0
+            tri[20] = 1.0            # x itself: u = v = h = 0, weight 1
             sw = 1.0
             swhh = 0.0
             count = 1
@@ -583,12 +599,16 @@ def local_jet(points, query_points, normals, indptr, indices, radius, refine, no
                 row[8] = u * v * v
                 row[9] = v * v * v
                 for a in range(10):
-                    rhs[a] += w * row[a] * h
+                    wa = w * row[a]
+                    rhs[a] += wa * h
                     for cc in range(a + 1):
-                        mat[a, cc] += w * row[a] * row[cc]
+                        tri[a * (a + 1) // 2 + cc] += wa * row[cc]
                 sw += w
                 swhh += w * h * h
                 count += 1
+            for a in range(10):
+                for cc in range(a + 1):
+                    mat[a, cc] = tri[a * (a + 1) // 2 + cc]
             for a in range(6):             # the quadric's normal equations: the leading block
                 for cc in range(a + 1):
                     quad[a, cc] = mat[a, cc]
@@ -1279,11 +1299,12 @@ def cell_grid_build(points, finite_index, origin, cell, dims):
 
 @njit(cache=True)
 def _cell_ball_one(order, sorted_points, cell_start, origin, inv, dims, x0, x1, x2, r2max,
-                   out, base, limit, ascending):
+                   out, base, limit, ascending, positions):
     """Indices of the grid points within ``sqrt(r2max)`` of (x0, x1, x2).
 
     Writes to ``out[base:]`` as far as ``limit`` allows and returns the count. With
-    ``ascending`` (and if all fit) they are sorted, else in grid order.
+    ``ascending`` (and if all fit) they are sorted, else in grid order. With ``positions`` they
+    are rows of ``sorted_points`` instead of point indices.
     """
     if not np.isfinite(x0 + x1 + x2):
         return 0
@@ -1305,7 +1326,7 @@ def _cell_ball_one(order, sorted_points, cell_start, origin, inv, dims, x0, x1, 
                 d2 = sorted_points[j, 2] - x2
                 if d0 * d0 + d1 * d1 + d2 * d2 <= r2max:
                     if base + found < limit:
-                        out[base + found] = order[j]
+                        out[base + found] = j if positions else order[j]
                     found += 1
     if ascending and base + found <= limit:
         _shell_sort(out, base, base + found)
@@ -1328,11 +1349,12 @@ def _shell_sort(a, lo, hi):
 
 @njit(parallel=True, cache=True)
 def cell_ball_csr(order, sorted_points, cell_start, origin, cell, dims, query_points, radius,
-                  nthreads, ascending):
+                  nthreads, ascending, positions):
     """All grid points within ``radius`` of each query point, CSR.
 
     Each list is ascending with ``ascending``, else in grid order (cheaper; for consumers that
-    do not depend on the order).
+    do not depend on the order). With ``positions`` the lists hold rows of ``sorted_points``
+    (whose neighbourhoods then lie close together in memory) instead of point indices.
 
     The grid comes from :func:`cell_grid_build` with ``cell >= radius``. Each thread streams
     its contiguous range of queries into its own slice of a scratch buffer sized from a sample
@@ -1351,7 +1373,7 @@ def cell_ball_csr(order, sorted_points, cell_start, origin, cell, dims, query_po
     for qi in range(0, m, step):
         tot += _cell_ball_one(order, sorted_points, cell_start, origin, inv, dims,
                               query_points[qi, 0], query_points[qi, 1], query_points[qi, 2],
-                              r2max, dummy, 0, 0, False)
+                              r2max, dummy, 0, 0, False, False)
         cnt += 1
     cap = 16 + (3 * tot) // (2 * max(cnt, 1))
     buf = np.empty(nthreads * per * cap, dtype=np.int64)
@@ -1363,7 +1385,8 @@ def cell_ball_csr(order, sorted_points, cell_start, origin, cell, dims, query_po
         for qi in range(t * per, min(m, (t + 1) * per)):
             f = _cell_ball_one(order, sorted_points, cell_start, origin, inv, dims,
                                query_points[qi, 0], query_points[qi, 1], query_points[qi, 2],
-                               r2max, buf, pos, limit, ascending)
+                               r2max, buf, pos, limit, ascending,
+                               positions)
             counts[qi + 1] = f
             pos += f
         used[t] = pos - lo
@@ -1385,7 +1408,7 @@ def cell_ball_csr(order, sorted_points, cell_start, origin, cell, dims, query_po
                 _cell_ball_one(order, sorted_points, cell_start, origin, inv, dims,
                                query_points[qi, 0], query_points[qi, 1], query_points[qi, 2],
                                r2max, indices, counts[qi], counts[qi + 1],
-                               ascending)
+                               ascending, positions)
     return counts, indices
 
 

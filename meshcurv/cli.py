@@ -65,6 +65,8 @@ class AnnotateOptions:
         "file" (require normals in the file) | "estimate" (ignore file normals)
     quality : field written to ``quality`` and coloured
     colormap : MeshLab colour map name, see :data:`meshcurv.shape.COLORMAPS`
+    viewpoint : (3,) tuple or None, orient estimated point-cloud normals towards this point
+        (a scanner position) instead of along a spanning tree
     """
 
     radius: str = None
@@ -73,6 +75,7 @@ class AnnotateOptions:
     normals: str = "auto"
     quality: str = "mean"
     colormap: str = "Turbo"
+    viewpoint: tuple = None
 
 
 def parse_radius(text):
@@ -128,7 +131,7 @@ def _normals_for(data, mode):
                                    "per-vertex normals (nx ny nz, finite, non-zero)")
         return n
     # auto: a point cloud's own normals (scanner, MeshLab) beat a PCA guess; for meshes the
-    # estimator's face normals are as good and consistently oriented by the faces
+    # estimator's own normals are as good and consistently oriented by the faces
     return n if (usable and data.is_point_cloud) else None
 
 
@@ -157,6 +160,7 @@ def annotate_file(input_path, output_path, options=AnnotateOptions(), preview=No
             data.vertices, None if data.is_point_cloud else data.faces,
             normals=_normals_for(data, options.normals), radius=radius,
             n_directions=int(options.directions), neighborhood=options.neighborhood,
+            orientation="mst" if options.viewpoint is None else options.viewpoint,
             progress=progress)
     except ValueError as exc:
         raise io.MeshFileError(f"{input_path}: {exc}") from exc
@@ -472,8 +476,13 @@ def _add_estimation_options(p):
                         "ball: all points within R; auto: kring for meshes, ball for clouds")
     g.add_argument("--normals", choices=("auto", "file", "estimate"), default="auto",
                    help="auto: a point cloud's own normals if the file has them, else "
-                        "estimated (face normals for meshes, PCA + orientation for clouds); "
+                        "estimated (PCA over the neighbourhood, oriented by the faces for "
+                        "meshes, by --viewpoint or a spanning tree for clouds); "
                         "file: require the file's normals; estimate: ignore them")
+    g.add_argument("--viewpoint", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
+                   help="orient estimated point-cloud normals towards this point (the scanner "
+                        "position, model units); exact and tile-independent, unlike the "
+                        "default spanning-tree orientation")
     g = p.add_argument_group("output (PLY; a LAS/LAZ output has no quality or colour)")
     g.add_argument("--quality", choices=shape.FIELDS, default="mean",
                    help="field copied to the PLY 'quality' property and coloured (default mean)")
@@ -497,7 +506,8 @@ def _positive_float(text):
 def _options_from(args):
     return AnnotateOptions(radius=args.radius, directions=args.directions,
                            neighborhood=args.neighborhood, normals=args.normals,
-                           quality=args.quality, colormap=args.colormap)
+                           quality=args.quality, colormap=args.colormap,
+                           viewpoint=None if args.viewpoint is None else tuple(args.viewpoint))
 
 
 def build_parser():
@@ -617,7 +627,9 @@ def _cmd_annotate_tiled(args, options):
                                     tile_size=args.tile_size, scheduler=client,
                                     progress=bool(args.progress or sys.stderr.isatty()),
                                     n_directions=int(options.directions),
-                                    neighborhood=options.neighborhood)
+                                    neighborhood=options.neighborhood,
+                                    orientation=("mst" if options.viewpoint is None
+                                                 else options.viewpoint))
         except TileError as exc:
             raise CommandError(f"{_one_line(exc)} (finished tiles are kept "
                                f"in {args.output}.meshcurv-work; re-run to resume)") from None

@@ -92,6 +92,22 @@ def test_annotate_point_cloud_takes_percent_radius_and_file_normals(tmp_path, ca
     assert np.nanmedian(back.fields["k2"]) == pytest.approx(0.5, rel=0.05)
 
 
+def test_viewpoint_orients_estimated_cloud_normals(tmp_path, capsys, inputs):
+    """--viewpoint at the sphere's centre turns the estimated normals inward: k ~ -0.5."""
+    data = io.read(str(inputs / "cloud.xyz"))
+    centre = data.vertices.mean(axis=0)
+    out = tmp_path / "cloud_inward.ply"
+    code, _, err = run(capsys, "annotate", inputs / "cloud.xyz", "-o", out, "--radius", "12%",
+                       "--normals", "estimate", "--viewpoint", *map(str, centre))
+    assert code == 0, err
+    radius = 12.0 / 100.0 * io.bbox_diagonal(data.vertices)
+    res = meshcurv.principal_curvatures(data.vertices, radius=radius,
+                                        orientation=tuple(float(c) for c in map(str, centre)))
+    back = io.read(str(out))
+    assert _bits(back.fields["k1"]) == _bits(res.k1)
+    assert np.nanmedian(back.fields["k1"]) == pytest.approx(-0.5, rel=0.05)
+
+
 def test_readme_command_writes_ply_and_png_and_creates_the_directory(tmp_path, capsys):
     out = tmp_path / "out" / "torus_curvature.ply"
     png = tmp_path / "out" / "torus_shape_index.png"
@@ -346,7 +362,15 @@ def test_tiling_flags_reach_annotate_tiled(tmp_path, capsys, las_file, monkeypat
     assert (call["in_path"], call["out_path"]) == (str(las_file), str(out))
     assert call["radius"] == 0.25 and call["tile_size"] == 0.5
     assert call["scheduler"] is None and call["n_directions"] == 6
+    assert call["orientation"] == "mst"
     assert "3000 points in 4 tiles" in stdout
+
+    # --viewpoint reaches the tiles as their orientation
+    calls.clear()
+    code, _, err = run(capsys, "annotate", las_file, "-o", out, "--tile-size", "0.5",
+                       "--viewpoint", "0", "0", "100")
+    assert code == 0, err
+    assert calls[0]["orientation"] == (0.0, 0.0, 100.0)
 
     # --dask-scheduler alone: connected client, default tile size; percent radius from header
     calls.clear()

@@ -144,13 +144,18 @@ def _as_arrays(vertices, faces, normals):
     return v, f, nv
 
 
-def _blocks(query, progress, desc):
-    """Split an index array into blocks of ``_BLOCK``, with a progress bar when asked."""
-    starts = range(0, len(query), _BLOCK)
-    bar = tqdm(total=len(query), desc=desc, unit="pt", disable=not progress, leave=False)
-    for s in starts:
-        yield query[s:s + _BLOCK]
-        bar.update(min(_BLOCK, len(query) - s))
+def _blocks(order, progress, desc):
+    """Blocks of ``_BLOCK`` positions, with a progress bar when asked.
+
+    ``order`` is an index array (blocks are its pieces) or a count m (blocks are slices of
+    ``range(m)``, which index without copies).
+    """
+    m = order if isinstance(order, (int, np.integer)) else len(order)
+    bar = tqdm(total=m, desc=desc, unit="pt", disable=not progress, leave=False)
+    for s in range(0, m, _BLOCK):
+        e = min(s + _BLOCK, m)
+        yield slice(s, e) if isinstance(order, (int, np.integer)) else order[s:e]
+        bar.update(e - s)
     bar.close()
 
 
@@ -336,7 +341,7 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
         points a block touches then stay in cache); as given for k-rings, whose memory
         accesses follow the mesh's own numbering."""
         if use_kring:
-            return np.arange(len(idx))
+            return len(idx)
         return spatial_order(v[idx], radius)
 
     # 2. normals: given, from the faces, or a PCA plane fit over each block's neighbourhood

@@ -159,10 +159,12 @@ def run_meshlab(method, vertices, faces, radius, normals=None, timeout=300.0, re
 # meshcurv
 # ---------------------------------------------------------------------------------------------
 
-# meshcurv variants compared. "meshcurv" uses the settings recommended in docs/comparison.md
-# (unweighted circle fits, PCA normals over the ball); "meshcurv (defaults)" the library's
-# current defaults; "meshcurv (auto R)" the recommended settings with meshcurv.autoradius.
-RECOMMENDED = dict(weighting="none", normal_estimation="pca")
+# meshcurv variants compared. "meshcurv" uses the library's defaults (RECOMMENDED holds what
+# differs from them: nothing); "meshcurv (equal weights)" the same with weighting="none", the
+# choice for noisy data when the weights are not picked from the measured noise;
+# "meshcurv (auto R)" the defaults with the radius from meshcurv.autoradius.
+RECOMMENDED = {}
+EQUAL_WEIGHTS = dict(weighting="none")
 
 
 def supported_settings(settings):
@@ -297,8 +299,8 @@ def run_case(case, methods, timeout):
         radius = case.radius
         if method == "meshcurv":
             r = run_meshcurv(m.vertices, m.faces, radius, **RECOMMENDED)
-        elif method == "meshcurv (defaults)":
-            r = run_meshcurv(m.vertices, m.faces, radius)
+        elif method == "meshcurv (equal weights)":
+            r = run_meshcurv(m.vertices, m.faces, radius, **EQUAL_WEIGHTS)
         elif method == "meshcurv (auto R)":
             t0 = time.perf_counter()
             radius = auto_radius(m.vertices, m.faces, **supported_settings(RECOMMENDED))
@@ -314,13 +316,13 @@ def run_case(case, methods, timeout):
     return rows, fields
 
 
-# meshcurv options measured one at a time against the recommended settings (same radius).
+# meshcurv options measured one at a time against the defaults (same radius).
 SETTINGS_STUDY = {
-    "none, PCA normals (recommended)": dict(weighting="none", normal_estimation="pca"),
+    "defaults (auto, PCA normals)": {},
+    "none, PCA normals": dict(weighting="none", normal_estimation="pca"),
     "none, face normals": dict(weighting="none", normal_estimation="faces"),
     "distance, PCA normals": dict(weighting="distance", normal_estimation="pca"),
     "distance, face normals": dict(weighting="distance", normal_estimation="faces"),
-    "auto, PCA normals": dict(weighting="auto", normal_estimation="pca"),
     "auto, face normals": dict(weighting="auto", normal_estimation="faces"),
     "none, PCA, slab 0.1": dict(weighting="none", normal_estimation="pca", slab=0.1),
     "none, PCA, slab 0.5": dict(weighting="none", normal_estimation="pca", slab=0.5),
@@ -365,7 +367,7 @@ def settings_study(cases, names=None):
 
 
 def radius_study(cases):
-    """Recommended meshcurv at fixed multiples of the shared radius and at auto_radius."""
+    """meshcurv (defaults) at fixed multiples of the shared radius and at auto_radius."""
     import meshcurv
     from meshcurv.autoradius import auto_radius
 
@@ -387,8 +389,9 @@ def radius_study(cases):
     return rows
 
 
-BALL_METHODS = ("meshcurv", "meshcurv (defaults)", "meshcurv (auto R)", "SDQF", "APSS")
-COMPARED = ["meshcurv", "meshcurv (defaults)", "meshcurv (auto R)", "Taubin", "QF", "SDQF", "APSS"]
+BALL_METHODS = ("meshcurv", "meshcurv (equal weights)", "meshcurv (auto R)", "SDQF", "APSS")
+COMPARED = ["meshcurv", "meshcurv (equal weights)", "meshcurv (auto R)", "Taubin", "QF", "SDQF",
+            "APSS"]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -658,8 +661,8 @@ def settings_table(rows):
 
 
 def settings_winners(rows):
-    """Per noise level: each setting's error relative to the recommended one, averaged
-    (geometric mean over the cases); < 1 means better than the recommended settings."""
+    """Per noise level: each setting's error relative to the defaults, averaged (geometric
+    mean over the cases); < 1 means better than the defaults."""
     names = list(dict.fromkeys(r["setting"] for r in rows))
     ref = names[0]
     out = ["| noise | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
@@ -722,11 +725,11 @@ def write_report(path, mode, rows, real, pictures, seconds, study=(), radii=()):
         "normal, convex positive, k1 >= k2 (see the script's docstring for what each MeshLab "
         "method needed).",
         "",
-        "Methods: **meshcurv** = `principal_curvatures(..., " +
-        ", ".join(f"{k}={v!r}" for k, v in RECOMMENDED.items()) + ")` (recommended settings); "
-        "**meshcurv (defaults)** = the estimator's defaults at the time of the run (" +
-        current_defaults() + "); **meshcurv (auto R)** = "
-        "recommended settings with the radius from `meshcurv.autoradius.auto_radius` (its own "
+        "Methods: **meshcurv** = `principal_curvatures(vertices, faces, radius)` with the "
+        "library's defaults at the time of the run (" + current_defaults() + "); "
+        "**meshcurv (equal weights)** = the same with `weighting='none'`; "
+        "**meshcurv (auto R)** = the defaults with the radius from "
+        "`meshcurv.autoradius.auto_radius` (its own "
         "radius, in the radius column). MeshLab: **Taubin** approximation (1-ring), **QF** "
         "Quadric Fitting (2-ring), **SDQF** Scale Dependent Quadric Fitting "
         "(`scale=PureValue(radius)`), **APSS** on the point set with MeshLab's vertex normals "
@@ -745,14 +748,13 @@ def write_report(path, mode, rows, real, pictures, seconds, study=(), radii=()):
         "",
         win_summary(rows),
         "",
-        "Cases where a MeshLab filter has a smaller mean error than meshcurv (recommended "
-        "settings):",
+        "Cases where a MeshLab filter has a smaller mean error than meshcurv (defaults):",
         "",
         losses(rows),
         "",
-        "The same for the estimator's current defaults:",
+        "The same for meshcurv with equal weights:",
         "",
-        losses(rows, "meshcurv (defaults)"),
+        losses(rows, "meshcurv (equal weights)"),
         "",
         "## Clean surfaces",
         "",
@@ -772,12 +774,12 @@ def write_report(path, mode, rows, real, pictures, seconds, study=(), radii=()):
                   "\"distance\" = (1 - r²/R²)⁴; normals from a PCA plane fit over the ball or "
                   "from the faces). Best per row in bold.", "",
                   settings_table(study), "",
-                  "Error relative to the recommended settings (first column), geometric mean "
+                  "Error relative to the defaults (first column), geometric mean "
                   "over the surfaces of each noise level; < 1 is better:", "",
                   settings_winners(study), ""]
     if radii:
         lines += ["## Fixed radii and `radius=\"auto\"`", "",
-                  "Recommended meshcurv settings at multiples of the shared radius R of each "
+                  "meshcurv defaults at multiples of the shared radius R of each "
                   "case and at the radius of `meshcurv.autoradius.auto_radius` (chosen from the "
                   "sampling density and a noise estimate, without the ground truth). Mean "
                   "(|Δk1| + |Δk2|) / 2 on the same vertices; best per row in bold.", "",
@@ -827,7 +829,7 @@ def main(argv=None):
     warm_up()
 
     noise = (0.0, 0.003) if mode == "smallest" else NOISE_LEVELS
-    methods = COMPARED if mode != "smallest" else ["meshcurv", "meshcurv (defaults)", "Taubin",
+    methods = COMPARED if mode != "smallest" else ["meshcurv", "meshcurv (equal weights)", "Taubin",
                                                    "QF", "SDQF", "APSS"]
     rows, pictures = [], []
     for case in build_cases(mode, noise):

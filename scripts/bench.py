@@ -362,8 +362,7 @@ def run(quick=False, repeat=3, apss_timeout=900.0, methods=None, stages=True, da
             report["rows"].append(dict(data=name, n=n, radius=radius, method=label,
                                        seconds=seconds, peak_bytes=peak, status="ok"))
             _progress(report["rows"][-1])
-        if f is not None and (not methods or any("APSS".startswith(m) or m == "APSS"
-                                                 for m in methods)):
+        if f is not None and (not methods or any("MeshLab APSS".startswith(m) for m in methods)):
             seconds, peak, status = apss_in_child(v, exact_normals, radius, 1, apss_timeout)
             report["rows"].append(dict(data=name, n=n, radius=radius, method="MeshLab APSS",
                                        seconds=seconds, peak_bytes=peak, status=status))
@@ -389,21 +388,17 @@ def _add_ratios(report):
         r["vertices_per_s"] = r["n"] / r["seconds"] if r["seconds"] > 0 else float("nan")
         r["bytes_per_vertex"] = r["peak_bytes"] / r["n"]
     scaling = {}
-    names = sorted({r["data"] for r in report["rows"]}, key=lambda s: s.split()[0])
+    size = {r["data"]: r["n"] for r in report["rows"]}
     for shape in ("torus", "sphere"):
-        sets = [s for s in names if s.startswith(shape)]
+        sets = [s for s in size if s.startswith(shape)]
         if len(sets) == 2:
-            small, large = sorted(sets, key=lambda s: by_n(report, s))
+            small, large = sorted(sets, key=size.get)
             for r in report["rows"]:
                 if r["data"] == large and (small, r["method"]) in by:
                     scaling[f"{shape} {r['method']}"] = dict(
                         size_ratio=r["n"] / by[(small, r["method"])]["n"],
                         time_ratio=r["seconds"] / by[(small, r["method"])]["seconds"])
     report["scaling"] = scaling
-
-
-def by_n(report, name):
-    return next(r["n"] for r in report["rows"] if r["data"] == name)
 
 
 def format_table(report):

@@ -5,7 +5,9 @@ points on a torus, no faces). Radius: :func:`meshcurv.neighborhoods.default_radi
 holding about 100 points. Methods:
 
 - ``meshcurv``: exact normals given; ``meshcurv (est.)``: normals estimated by PCA over the
-  ball and oriented (by the faces on meshes, by minimum-spanning-tree propagation on the cloud).
+  neighbourhood (k-ring on meshes, ball on the cloud), refined by the local fit and oriented
+  (by the faces on meshes, by minimum-spanning-tree propagation on the cloud). Everything
+  else at the library's defaults.
 - MeshLab ``compute_curvature_principal_directions_per_vertex`` with "Taubin approximation"
   (1-ring), "Quadric Fitting" (2-ring) and "Scale Dependent Quadric Fitting" (SDQF, ball of the
   same radius), called in this process on a ``MeshSet`` prepared beforehand.

@@ -132,7 +132,7 @@ def _as_arrays(vertices, faces, normals):
         if not np.issubdtype(f.dtype, np.integer):
             if not np.all(np.mod(f, 1) == 0):
                 raise ValueError("faces must hold integer vertex indices")
-        f = f.astype(np.int64)
+        f = f.astype(np.int64, copy=False)
         if f.size and (f.min() < 0 or f.max() >= len(v)):
             raise ValueError(
                 f"faces index vertices 0..{len(v) - 1}, found indices {f.min()}..{f.max()}")

@@ -639,150 +639,6 @@ def local_jet(points, query_points, normals, indptr, indices, radius, refine, no
             normals[q, 2] = g2 * s
 
 
-@njit(parallel=True, cache=True)
-def kring_ball_csr(adj_ptr, adj_idx, points, query, radius, nthreads):
-    """Neighbours of each query vertex reachable over mesh edges without leaving the ball.
-
-    Breadth-first search from the query vertex over the edge graph (``adj_ptr``, ``adj_idx``,
-    CSR), expanding only through vertices within Euclidean ``radius`` of it: a connected,
-    radius-limited k-ring that cannot jump across a thin sheet. Returns CSR (indptr, indices)
-    with the query vertex itself excluded. Two passes: count, then fill. ``nthreads`` visited-
-    stamp arrays of length n are allocated (one per thread, not per vertex).
-    """
-    m = query.shape[0]
-    n = points.shape[0]
-    r2max = radius * radius
-    counts = np.zeros(m + 1, dtype=np.int64)
-    nthreads = max(1, min(m, nthreads))
-    per = (m + nthreads - 1) // nthreads
-    for pss in range(2):
-        if pss == 1:
-            for i in range(m):
-                counts[i + 1] += counts[i]
-            indices = np.empty(counts[m], dtype=np.int64)
-        else:
-            indices = np.empty(0, dtype=np.int64)
-        for t in prange(nthreads):
-            stamp = np.full(n, -1, dtype=np.int64)
-            queue = np.empty(n, dtype=np.int32)
-            for qi in range(t * per, min(m, (t + 1) * per)):
-                s = query[qi]
-                x0 = points[s, 0]
-                x1 = points[s, 1]
-                x2 = points[s, 2]
-                if not np.isfinite(x0 + x1 + x2):
-                    continue
-                stamp[s] = qi
-                head = 0
-                tail = 1
-                queue[0] = s
-                found = 0
-                base = counts[qi] if pss == 1 else 0
-                while head < tail:
-                    a = queue[head]
-                    head += 1
-                    for e in range(adj_ptr[a], adj_ptr[a + 1]):
-                        b = adj_idx[e]
-                        if stamp[b] == qi:
-                            continue
-                        stamp[b] = qi
-                        d0 = points[b, 0] - x0
-                        d1 = points[b, 1] - x1
-                        d2 = points[b, 2] - x2
-                        if d0 * d0 + d1 * d1 + d2 * d2 <= r2max:
-                            queue[tail] = b
-                            tail += 1
-                            if pss == 1:
-                                indices[base + found] = b
-                            found += 1
-                if pss == 0:
-                    counts[qi + 1] = found
-    return counts, indices
-
-
-@njit(parallel=True, cache=True)
-def local_covariance(points, query_points, indptr, indices, radius):
-    """Covariance (m, 3, 3) of each query point's neighbours within ``radius`` (point included).
-
-    Accumulated about the query point and corrected to the centroid, in units of ``radius`` so
-    that translation by large offsets does not cost precision. Also returns the counts.
-    """
-    m = query_points.shape[0]
-    cov = np.zeros((m, 3, 3))
-    cnt = np.zeros(m, dtype=np.int64)
-    r2max = radius * radius
-    inv_r = 1.0 / radius
-    for q in prange(m):
-        x0 = query_points[q, 0]
-        x1 = query_points[q, 1]
-        x2 = query_points[q, 2]
-        s0 = s1 = s2 = 0.0
-        s00 = s01 = s02 = s11 = s12 = s22 = 0.0
-        c = 1
-        for j in range(indptr[q], indptr[q + 1]):
-            k = indices[j]
-            a = points[k, 0] - x0
-            b = points[k, 1] - x1
-            d = points[k, 2] - x2
-            dd = a * a + b * b + d * d
-            if not (dd > 0.0 and dd <= r2max):
-                continue
-            a *= inv_r
-            b *= inv_r
-            d *= inv_r
-            c += 1
-            s0 += a
-            s1 += b
-            s2 += d
-            s00 += a * a
-            s01 += a * b
-            s02 += a * d
-            s11 += b * b
-            s12 += b * d
-            s22 += d * d
-        m0 = s0 / c
-        m1 = s1 / c
-        m2 = s2 / c
-        cov[q, 0, 0] = s00 / c - m0 * m0
-        cov[q, 0, 1] = s01 / c - m0 * m1
-        cov[q, 0, 2] = s02 / c - m0 * m2
-        cov[q, 1, 1] = s11 / c - m1 * m1
-        cov[q, 1, 2] = s12 / c - m1 * m2
-        cov[q, 2, 2] = s22 / c - m2 * m2
-        cov[q, 1, 0] = cov[q, 0, 1]
-        cov[q, 2, 0] = cov[q, 0, 2]
-        cov[q, 2, 1] = cov[q, 1, 2]
-        cnt[q] = c
-    return cov, cnt
-
-
-@njit(cache=True)
-def propagate_signs(order, predecessors, normals):
-    """Flip normals along a spanning-tree traversal so that each agrees with its parent.
-
-    ``order`` is a breadth-first order of the tree and ``predecessors`` the parent of each
-    vertex (negative for roots). ``normals`` (n, 3) is modified in place.
-    """
-    for i in order:
-        p = predecessors[i]
-        if p < 0:
-            continue
-        d = normals[i, 0] * normals[p, 0] + normals[i, 1] * normals[p, 1] + normals[i, 2] * normals[p, 2]
-        if d < 0.0:
-            normals[i, 0] = -normals[i, 0]
-            normals[i, 1] = -normals[i, 1]
-            normals[i, 2] = -normals[i, 2]
-
-
-# ---------------------------------------------------------------------------------------------
-# Neighbour search and plumbing kernels (speed; see scripts/bench.py).
-#
-# The CSR builders below make one search per query point: each thread writes its (contiguous)
-# range of queries as one stream into its own slice of an int32 scratch buffer, sized from a
-# sample of the queries; a thread whose stream overflows searches its range again, straight
-# into the output. Output order is the order a query's neighbours are found in.
-
-
 @njit(cache=True)
 def edge_adjacency_csr(faces, n):
     """Undirected edge graph of a triangle mesh as CSR ``(indptr, indices)``, sorted, unique.
@@ -840,7 +696,8 @@ def edge_adjacency_csr(faces, n):
 
 @njit(cache=True)
 def _kring_one(adj_ptr, adj_idx, points, s, tag, r2max, stamp, queue, out, base, limit):
-    """Breadth-first, radius-limited k-ring of vertex ``s``; see :func:`kring_ball_csr`.
+    """Breadth-first, radius-limited k-ring of vertex ``s``; the connected, radius-limited
+    neighbourhood that cannot jump across a thin sheet.
 
     Writes the neighbours found to ``out[base:]`` as long as they fit below ``limit`` and returns
     how many there are (so a caller can detect an overflow). ``stamp`` marks visited vertices
@@ -877,12 +734,12 @@ def _kring_one(adj_ptr, adj_idx, points, s, tag, r2max, stamp, queue, out, base,
 
 
 @njit(parallel=True, cache=True)
-def kring_ball_csr_fast(adj_ptr, adj_idx, points, query, radius, stamp, queue, tag0):
+def kring_ball_csr(adj_ptr, adj_idx, points, query, radius, stamp, queue, tag0):
     """Radius-limited k-ring CSR lists, one breadth-first search per query vertex.
 
-    Same output as :func:`kring_ball_csr` (query vertex excluded, breadth-first order), at about
-    half the cost: each thread streams its results into an int32 scratch sized from a sample
-    of 64 queries, copied once; a thread whose stream overflows searches its range again.
+    Lists exclude the query vertex and are in breadth-first order. Each thread streams its
+    results into an int32 scratch sized from a sample of 64 queries, copied once; a thread
+    whose stream overflows searches its range again.
     ``stamp`` (threads, n) int32 or int64 and ``queue`` (threads, n) int32 are reusable work
     arrays (``stamp`` starts at -1); ``tag0`` is an offset that makes this call's stamps
     unique: pass a different ``tag0`` per call (e.g. the position of the block), with
@@ -1046,7 +903,7 @@ def grid_ball_csr(points, order, cell_start, table_keys, table_cells, origin, ce
     """All grid points within ``radius`` of each query point, CSR with ascending indices.
 
     The grid comes from :func:`grid_build` with ``cell >= radius``, so the 27 cells around a
-    query cell hold every candidate. Same streaming scheme as :func:`kring_ball_csr_fast`.
+    query cell hold every candidate. Same streaming scheme as :func:`kring_ball_csr`.
     """
     m = query_points.shape[0]
     r2max = radius * radius
@@ -1183,8 +1040,9 @@ def _smallest_eigvec_jacobi3(a, out):
 def pca_normals_csr(points, query_points, indptr, indices, radius):
     """Unit normals (m, 3) of the least-squares plane through each query point's neighbours.
 
-    The covariance is accumulated exactly as in :func:`local_covariance` (same sums, same
-    order, so the same matrix); its smallest eigenvector comes from Jacobi rotations. NaN rows
+    The covariance of the neighbours within ``radius`` (the point included) is accumulated
+    about the query point in units of ``radius`` (precise at large offsets) and corrected to
+    the centroid; its smallest eigenvector comes from Jacobi rotations. NaN rows
     where fewer than 3 points lie in the ball or the covariance is not finite. Signs are
     arbitrary (the orientation step fixes them).
     """

@@ -82,7 +82,7 @@ def kring_neighbors(points, adjacency, radius, query, work=None):
     if work is None:
         work = KringWork(len(points))
     tag0 = work.take_tags(len(query))
-    return kernels.kring_ball_csr_fast(adjacency[0], adjacency[1], points, query, float(radius),
+    return kernels.kring_ball_csr(adjacency[0], adjacency[1], points, query, float(radius),
                                        work.stamp, work.queue, tag0)
 
 

@@ -329,10 +329,10 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
             return ball_neighbors(tree, finite, v[idx], radius, ascending=False,
                                   positions=in_grid)
 
-    # The kernels read the neighbours' coordinates from ``kernel_points``: with a dense grid,
-    # its copy of the points in grid order (the lists then hold its rows, ``rank`` their vertex
-    # indices), where a neighbourhood lies together in memory however the input is ordered.
-    in_grid = not use_kring and isinstance(tree, BallGrid) and tree.dims is not None
+    # The kernels read the neighbours' coordinates from ``kernel_points``: with a grid, its copy
+    # of the points in grid order (the lists then hold its rows, ``rank`` their vertex indices),
+    # where a neighbourhood lies together in memory however the input is ordered.
+    in_grid = not use_kring and isinstance(tree, BallGrid)
     kernel_points = tree.sorted_points if in_grid else v
     rank = tree.order if in_grid else None
 

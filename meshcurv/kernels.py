@@ -810,12 +810,14 @@ def _hash_slot(key, mask):
 
 
 @njit(cache=True)
-def grid_build(points, finite_index, origin, cell):
+def hashed_grid_build(points, finite_index, origin, cell):
     """Uniform grid over ``points[finite_index]`` with cells of edge ``cell``.
 
-    Returns ``(order, cell_start, table_keys, table_cells)``: ``order`` lists the point
-    indices cell by cell (ascending within a cell), cell ``c`` holds
-    ``order[cell_start[c]:cell_start[c + 1]]``, and the open-addressing hash table
+    The sparse counterpart of :func:`cell_grid_build`, for extents where a dense grid would
+    hold too many empty cells. Returns ``(order, sorted_points, cell_start, table_keys,
+    table_cells)``: ``order`` lists the point indices cell by cell (ascending within a cell),
+    ``sorted_points`` their coordinates in that order, occupied cell ``c`` holds positions
+    ``cell_start[c]:cell_start[c + 1]``, and the open-addressing hash table
     ``table_keys``/``table_cells`` (-1 = empty) maps packed cell keys to cells.
     """
     k = finite_index.shape[0]
@@ -829,6 +831,11 @@ def grid_build(points, finite_index, origin, cell):
         keys[j] = _grid_key(cx, cy, cz)
     srt = np.argsort(keys, kind="mergesort")  # stable: ascending point index within a cell
     order = finite_index[srt]
+    sorted_points = np.empty((k, 3))
+    for j in range(k):
+        sorted_points[j, 0] = points[order[j], 0]
+        sorted_points[j, 1] = points[order[j], 1]
+        sorted_points[j, 2] = points[order[j], 2]
     ncell = 0
     for j in range(k):
         if j == 0 or keys[srt[j]] != keys[srt[j - 1]]:
@@ -852,107 +859,7 @@ def grid_build(points, finite_index, origin, cell):
             table_keys[slot] = key
             table_cells[slot] = c
     cell_start[ncell] = k
-    return order, cell_start, table_keys, table_cells
-
-
-@njit(cache=True)
-def _grid_ball_one(points, order, cell_start, table_keys, table_cells, origin, inv, x0, x1, x2,
-                   r2max, out, base, limit):
-    """Indices of the grid points within ``sqrt(r2max)`` of (x0, x1, x2), ascending.
-
-    Writes to ``out[base:]`` as far as ``limit`` allows (sorted only if all fit) and returns
-    the count.
-    """
-    if not np.isfinite(x0 + x1 + x2):
-        return 0
-    mask = table_keys.shape[0] - 1
-    cx = np.int64(math.floor((x0 - origin[0]) * inv))
-    cy = np.int64(math.floor((x1 - origin[1]) * inv))
-    cz = np.int64(math.floor((x2 - origin[2]) * inv))
-    found = 0
-    for ax in range(cx - 1, cx + 2):
-        for ay in range(cy - 1, cy + 2):
-            for az in range(cz - 1, cz + 2):
-                key = _grid_key(ax, ay, az)
-                slot = _hash_slot(key, mask)
-                c = -1
-                while table_keys[slot] != -1:
-                    if table_keys[slot] == key:
-                        c = table_cells[slot]
-                        break
-                    slot = (slot + 1) & mask
-                if c < 0:
-                    continue
-                for j in range(cell_start[c], cell_start[c + 1]):
-                    i = order[j]
-                    d0 = points[i, 0] - x0
-                    d1 = points[i, 1] - x1
-                    d2 = points[i, 2] - x2
-                    if d0 * d0 + d1 * d1 + d2 * d2 <= r2max:
-                        if base + found < limit:
-                            out[base + found] = i
-                        found += 1
-    if base + found <= limit:
-        out[base:base + found].sort()
-    return found
-
-
-@njit(parallel=True, cache=True)
-def grid_ball_csr(points, order, cell_start, table_keys, table_cells, origin, cell,
-                  query_points, radius, nthreads):
-    """All grid points within ``radius`` of each query point, CSR with ascending indices.
-
-    The grid comes from :func:`grid_build` with ``cell >= radius``, so the 27 cells around a
-    query cell hold every candidate. Same streaming scheme as :func:`kring_ball_csr`.
-    """
-    m = query_points.shape[0]
-    r2max = radius * radius
-    inv = 1.0 / cell
-    counts = np.zeros(m + 1, dtype=np.int64)
-    nthreads = max(1, min(m, nthreads))
-    per = (m + nthreads - 1) // nthreads
-    dummy = np.empty(0, dtype=np.int64)
-    step = max(1, m // 64)
-    tot = 0
-    cnt = 0
-    for qi in range(0, m, step):
-        tot += _grid_ball_one(points, order, cell_start, table_keys, table_cells, origin, inv,
-                              query_points[qi, 0], query_points[qi, 1],
-                              query_points[qi, 2], r2max, dummy, 0, 0)
-        cnt += 1
-    cap = 16 + (3 * tot) // (2 * max(cnt, 1))
-    buf = np.empty(nthreads * per * cap, dtype=np.int64)
-    used = np.zeros(nthreads, dtype=np.int64)
-    for t in prange(nthreads):
-        lo = t * per * cap
-        limit = lo + per * cap
-        pos = lo
-        for qi in range(t * per, min(m, (t + 1) * per)):
-            f = _grid_ball_one(points, order, cell_start, table_keys, table_cells, origin, inv,
-                               query_points[qi, 0], query_points[qi, 1],
-                               query_points[qi, 2], r2max, buf, pos, limit)
-            counts[qi + 1] = f
-            pos += f
-        used[t] = pos - lo
-    for i in range(m):
-        counts[i + 1] += counts[i]
-    indices = np.empty(counts[m], dtype=np.int64)
-    for t in prange(nthreads):
-        q0 = t * per
-        if q0 >= m:
-            continue
-        q1 = min(m, (t + 1) * per)
-        if used[t] <= per * cap:
-            lo = t * per * cap
-            o = counts[q0]
-            for j in range(used[t]):
-                indices[o + j] = buf[lo + j]
-        else:
-            for qi in range(q0, q1):
-                _grid_ball_one(points, order, cell_start, table_keys, table_cells, origin, inv,
-                               query_points[qi, 0], query_points[qi, 1],
-                               query_points[qi, 2], r2max, indices, counts[qi], counts[qi + 1])
-    return counts, indices
+    return order, sorted_points, cell_start, table_keys, table_cells
 
 
 @njit(cache=True)
@@ -1163,36 +1070,66 @@ def cell_grid_build(points, finite_index, origin, cell, dims):
 
 
 @njit(cache=True)
-def _cell_ball_one(order, sorted_points, cell_start, origin, inv, dims, x0, x1, x2, r2max,
-                   out, base, limit, ascending, positions):
+def _scan_run(order, sorted_points, j0, j1, x0, x1, x2, r2max, out, base, found, limit,
+              positions):
+    """Append the grid positions ``j0:j1`` within ``sqrt(r2max)`` of (x0, x1, x2) to
+    ``out[base + found:]`` (as far as ``limit`` allows); returns the new count."""
+    for j in range(j0, j1):
+        d0 = sorted_points[j, 0] - x0
+        d1 = sorted_points[j, 1] - x1
+        d2 = sorted_points[j, 2] - x2
+        if d0 * d0 + d1 * d1 + d2 * d2 <= r2max:
+            if base + found < limit:
+                out[base + found] = j if positions else order[j]
+            found += 1
+    return found
+
+
+@njit(cache=True)
+def _cell_ball_one(order, sorted_points, cell_start, origin, inv, dims, table_keys, table_cells,
+                   x0, x1, x2, r2max, out, base, limit, ascending, positions):
     """Indices of the grid points within ``sqrt(r2max)`` of (x0, x1, x2).
 
-    Writes to ``out[base:]`` as far as ``limit`` allows and returns the count. With
-    ``ascending`` (and if all fit) they are sorted, else in grid order. With ``positions`` they
-    are rows of ``sorted_points`` instead of point indices.
+    Dense grid (``table_keys`` empty): the 27 cells around the query cell as 9 contiguous z
+    runs. Hashed grid: the same cells in the same order, each looked up by its key; both list
+    the same points in the same order. Writes to ``out[base:]`` as far as ``limit`` allows and
+    returns the count. With ``ascending`` (and if all fit) they are sorted, else in grid order.
+    With ``positions`` they are rows of ``sorted_points`` instead of point indices.
     """
     if not np.isfinite(x0 + x1 + x2):
         return 0
-    nx, ny, nz = dims[0], dims[1], dims[2]
-    cx = _cell_coord(x0, origin[0], inv, nx)
-    cy = _cell_coord(x1, origin[1], inv, ny)
-    cz = _cell_coord(x2, origin[2], inv, nz)
-    z0 = max(cz - 1, 0)
-    z1 = min(cz + 1, nz - 1)
     found = 0
-    if z0 > z1:
-        return 0
-    for ax in range(max(cx - 1, 0), min(cx + 2, nx)):
-        for ay in range(max(cy - 1, 0), min(cy + 2, ny)):
-            col = (ax * ny + ay) * nz
-            for j in range(cell_start[col + z0], cell_start[col + z1 + 1]):
-                d0 = sorted_points[j, 0] - x0
-                d1 = sorted_points[j, 1] - x1
-                d2 = sorted_points[j, 2] - x2
-                if d0 * d0 + d1 * d1 + d2 * d2 <= r2max:
-                    if base + found < limit:
-                        out[base + found] = j if positions else order[j]
-                    found += 1
+    if table_keys.shape[0] > 0:
+        mask = table_keys.shape[0] - 1
+        cx = np.int64(math.floor((x0 - origin[0]) * inv))
+        cy = np.int64(math.floor((x1 - origin[1]) * inv))
+        cz = np.int64(math.floor((x2 - origin[2]) * inv))
+        for ax in range(cx - 1, cx + 2):
+            for ay in range(cy - 1, cy + 2):
+                for az in range(cz - 1, cz + 2):
+                    key = _grid_key(ax, ay, az)
+                    slot = _hash_slot(key, mask)
+                    while table_keys[slot] != -1 and table_keys[slot] != key:
+                        slot = (slot + 1) & mask
+                    if table_keys[slot] == key:
+                        c = table_cells[slot]
+                        found = _scan_run(order, sorted_points, cell_start[c], cell_start[c + 1],
+                                          x0, x1, x2, r2max, out, base, found, limit, positions)
+    else:
+        nx, ny, nz = dims[0], dims[1], dims[2]
+        cx = _cell_coord(x0, origin[0], inv, nx)
+        cy = _cell_coord(x1, origin[1], inv, ny)
+        cz = _cell_coord(x2, origin[2], inv, nz)
+        z0 = max(cz - 1, 0)
+        z1 = min(cz + 1, nz - 1)
+        if z0 > z1:
+            return 0
+        for ax in range(max(cx - 1, 0), min(cx + 2, nx)):
+            for ay in range(max(cy - 1, 0), min(cy + 2, ny)):
+                col = (ax * ny + ay) * nz
+                found = _scan_run(order, sorted_points, cell_start[col + z0],
+                                  cell_start[col + z1 + 1], x0, x1, x2, r2max, out, base, found,
+                                  limit, positions)
     if ascending and base + found <= limit:
         _shell_sort(out, base, base + found)
     return found
@@ -1213,15 +1150,16 @@ def _shell_sort(a, lo, hi):
 
 
 @njit(parallel=True, cache=True)
-def cell_ball_csr(order, sorted_points, cell_start, origin, cell, dims, query_points, radius,
-                  nthreads, ascending, positions):
+def cell_ball_csr(order, sorted_points, cell_start, origin, cell, dims, table_keys, table_cells,
+                  query_points, radius, nthreads, ascending, positions):
     """All grid points within ``radius`` of each query point, CSR.
 
     Each list is ascending with ``ascending``, else in grid order (cheaper; for consumers that
     do not depend on the order). With ``positions`` the lists hold rows of ``sorted_points``
     (whose neighbourhoods then lie close together in memory) instead of point indices.
 
-    The grid comes from :func:`cell_grid_build` with ``cell >= radius``. Each thread streams
+    The grid comes from :func:`cell_grid_build` (``table_keys`` empty) or
+    :func:`hashed_grid_build` (``dims`` unused) with ``cell >= radius``. Each thread streams
     its contiguous range of queries into its own slice of a scratch buffer sized from a sample
     of the queries; a thread whose slice overflows searches its range again into the output.
     """
@@ -1237,6 +1175,7 @@ def cell_ball_csr(order, sorted_points, cell_start, origin, cell, dims, query_po
     cnt = 0
     for qi in range(0, m, step):
         tot += _cell_ball_one(order, sorted_points, cell_start, origin, inv, dims,
+                              table_keys, table_cells,
                               query_points[qi, 0], query_points[qi, 1], query_points[qi, 2],
                               r2max, dummy, 0, 0, False, False)
         cnt += 1
@@ -1249,6 +1188,7 @@ def cell_ball_csr(order, sorted_points, cell_start, origin, cell, dims, query_po
         pos = lo
         for qi in range(t * per, min(m, (t + 1) * per)):
             f = _cell_ball_one(order, sorted_points, cell_start, origin, inv, dims,
+                               table_keys, table_cells,
                                query_points[qi, 0], query_points[qi, 1], query_points[qi, 2],
                                r2max, buf, pos, limit, ascending,
                                positions)
@@ -1271,6 +1211,7 @@ def cell_ball_csr(order, sorted_points, cell_start, origin, cell, dims, query_po
         else:
             for qi in range(q0, q1):
                 _cell_ball_one(order, sorted_points, cell_start, origin, inv, dims,
+                               table_keys, table_cells,
                                query_points[qi, 0], query_points[qi, 1], query_points[qi, 2],
                                r2max, indices, counts[qi], counts[qi + 1],
                                ascending, positions)

@@ -89,23 +89,22 @@ def kring_neighbors(points, adjacency, radius, query, work=None):
 class BallGrid(NamedTuple):
     """Uniform grid over the finite points of a cloud for ball queries of one radius.
 
-    Built by :func:`ball_grid`. Dense form (``dims`` set): cells numbered x-major, z fastest,
-    ``order`` lists point indices cell by cell (ascending within a cell), ``sorted_points``
-    their coordinates in that order, and ``cell_start`` the start of each cell. Hashed form
-    (``dims`` None, for sparse extents): ``order``/``cell_start`` over the occupied cells only,
-    found from their packed keys through ``table_keys``/``table_cells``.
+    Built by :func:`ball_grid`. ``order`` lists point indices cell by cell (ascending within a
+    cell) and ``sorted_points`` their coordinates in that order. Dense form (``table_keys``
+    empty): cells numbered x-major, z fastest, cell ``c`` starting at ``cell_start[c]``. Hashed
+    form (sparse extents; ``dims`` unused): ``cell_start`` over the occupied cells only, found
+    from their packed keys through ``table_keys``/``table_cells``. Both give the same lists.
     """
 
-    points: np.ndarray
     radius: float
     origin: np.ndarray
     cell: float
     order: np.ndarray
+    sorted_points: np.ndarray
     cell_start: np.ndarray
-    dims: np.ndarray = None
-    sorted_points: np.ndarray = None
-    table_keys: np.ndarray = None
-    table_cells: np.ndarray = None
+    dims: np.ndarray
+    table_keys: np.ndarray
+    table_cells: np.ndarray
 
 
 # Dense grids hold up to this many cells per point (int64 each); sparser extents are hashed.
@@ -144,11 +143,14 @@ def ball_grid(points, radius):
         if float(np.prod(dims.astype(np.float64))) <= _DENSE_CELLS_PER_POINT * len(finite) + 2 ** 20:
             order, sorted_points, cell_start = kernels.cell_grid_build(
                 p, finite.astype(np.int64), lo, cell, dims)
-            return BallGrid(p, radius, lo, cell, order, cell_start, dims, sorted_points)
+            none = np.zeros(0, dtype=np.int64)
+            return BallGrid(radius, lo, cell, order, sorted_points, cell_start, dims, none, none)
     else:
         lo = np.zeros(3)
-    order, cell_start, keys, cells = kernels.grid_build(p, finite.astype(np.int64), lo, cell)
-    return BallGrid(p, radius, lo, cell, order, cell_start, table_keys=keys, table_cells=cells)
+    order, sorted_points, cell_start, keys, cells = kernels.hashed_grid_build(
+        p, finite.astype(np.int64), lo, cell)
+    return BallGrid(radius, lo, cell, order, sorted_points, cell_start, np.zeros(3, np.int64),
+                    keys, cells)
 
 
 def ball_neighbors(tree, finite_index, query_points, radius, ascending=True, positions=False):
@@ -162,14 +164,14 @@ def ball_neighbors(tree, finite_index, query_points, radius, ascending=True, pos
     query_points : (m, 3) float64 (rows with NaN get no neighbours)
     radius : float, model units
     ascending : bool, default True
-        Sort each list. False leaves a dense grid's lists in grid order (about twice as fast;
+        Sort each list. False leaves a grid's lists in grid order (about twice as fast;
         for consumers that do not depend on the order, like the curvature kernel).
     positions : bool, default False
-        With a dense grid: return rows of ``tree.sorted_points`` (the points in grid order,
+        With a grid: return rows of ``tree.sorted_points`` (the points in grid order,
         ``tree.order`` their vertex indices) instead of vertex indices. Kernels that read the
         neighbours' coordinates from ``tree.sorted_points`` then find them close together in
         memory, which on a large cloud in random order is several times faster. Ignored (vertex
-        indices) for the other searches; check ``tree.dims is not None``.
+        indices) with a cKDTree.
 
     Returns
     -------
@@ -180,14 +182,10 @@ def ball_neighbors(tree, finite_index, query_points, radius, ascending=True, pos
         if float(radius) != tree.radius:
             raise ValueError(f"the grid was built for radius {tree.radius}, not {radius}")
         q = np.ascontiguousarray(query_points, dtype=np.float64)
-        if tree.dims is not None:
-            return kernels.cell_ball_csr(tree.order, tree.sorted_points, tree.cell_start,
-                                         tree.origin, tree.cell, tree.dims, q, tree.radius,
-                                         numba.get_num_threads(), bool(ascending),
-                                         bool(positions))
-        return kernels.grid_ball_csr(tree.points, tree.order, tree.cell_start, tree.table_keys,
-                                     tree.table_cells, tree.origin, tree.cell, q, tree.radius,
-                                     numba.get_num_threads())
+        return kernels.cell_ball_csr(tree.order, tree.sorted_points, tree.cell_start,
+                                     tree.origin, tree.cell, tree.dims, tree.table_keys,
+                                     tree.table_cells, q, tree.radius, numba.get_num_threads(),
+                                     bool(ascending), bool(positions))
     ok = np.isfinite(query_points).all(axis=1)
     lists = np.empty(len(query_points), dtype=object)
     lists[:] = [[] for _ in range(len(query_points))]

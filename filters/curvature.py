@@ -53,17 +53,11 @@ def resolve_radius(radius, vertices):
     return float(value)
 
 
-def _has_scalar(mesh, name):
+def _has_attribute(read, name):
+    """Whether the mesh has the custom attribute ``name``; ``read`` is its reader method
+    (``mesh.vertex_custom_scalar_attribute_array`` or ``..._point_attribute_matrix``)."""
     try:
-        mesh.vertex_custom_scalar_attribute_array(name)
-        return True
-    except pymeshlab.PyMeshLabException:
-        return False
-
-
-def _has_point(mesh, name):
-    try:
-        mesh.vertex_custom_point_attribute_matrix(name)
+        read(name)
         return True
     except pymeshlab.PyMeshLabException:
         return False
@@ -71,7 +65,7 @@ def _has_point(mesh, name):
 
 def _fresh_name(mesh, stem):
     k = 0
-    while _has_scalar(mesh, f"{stem}_{k}"):
+    while _has_attribute(mesh.vertex_custom_scalar_attribute_array, f"{stem}_{k}"):
         k += 1
     return f"{stem}_{k}"
 
@@ -85,7 +79,7 @@ def _store_scalar(ms, name, values):
     """
     mesh = ms.current_mesh()
     values = np.ascontiguousarray(values, dtype=np.float64)
-    if not _has_scalar(mesh, name):
+    if not _has_attribute(mesh.vertex_custom_scalar_attribute_array, name):
         mesh.add_vertex_custom_scalar_attribute(values, name)
         return
     carrier = _fresh_name(mesh, "meshcurv_tmp")
@@ -97,7 +91,7 @@ def _store_point(ms, name, values):
     """Set the custom point attribute ``name`` of the current mesh to (n, 3) ``values``."""
     mesh = ms.current_mesh()
     values = np.ascontiguousarray(values, dtype=np.float64)
-    if not _has_point(mesh, name):
+    if not _has_attribute(mesh.vertex_custom_point_attribute_matrix, name):
         mesh.add_vertex_custom_point_attribute(values, name)
         return
     carriers = []

@@ -8,8 +8,9 @@ Sign convention: outward normal, convex positive, k1 >= k2; radius in model unit
 >>> res.k1, res.k2, res.d1, res.d2, res.shape_index, res.valid  # doctest: +SKIP
 """
 
-from .estimator import CurvatureResult, principal_curvatures
+from . import surfaces  # noqa: F401  (meshcurv.surfaces without a separate import)
+from .estimator import CurvatureResult, estimate_normals, principal_curvatures
 from .neighborhoods import default_radius
 
-__all__ = ["CurvatureResult", "principal_curvatures", "default_radius"]
+__all__ = ["CurvatureResult", "principal_curvatures", "estimate_normals", "default_radius"]
 __version__ = "0.1.0"

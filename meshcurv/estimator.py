@@ -12,7 +12,7 @@ from . import kernels, normals as nrm, shape
 from .neighborhoods import (BallGrid, KringWork, ball_grid, ball_neighbors, default_radius,
                             edge_adjacency, kring_neighbors, spatial_order)
 
-__all__ = ["CurvatureResult", "principal_curvatures"]
+__all__ = ["CurvatureResult", "principal_curvatures", "estimate_normals"]
 
 # Query points per call into the kernels: bounds the memory of the neighbour lists (about
 # 0.8 kB per query point at 100 neighbours) at no measurable cost in speed.
@@ -40,7 +40,7 @@ def _mix_normals(start, refined, beta):
 def weight_blend(noise, radius, weighting="auto"):
     """Per-vertex mix of the circle fits' weight functions, in [0, 1] (1 = distance weights).
 
-    "auto": ``1 / (1 + (noise / (NOISE_SCALE * radius))^2)``, i.e. distance weights where the
+    "auto": ``1 / (1 + (noise / (NOISE_SCALE * radius))^4)``, i.e. distance weights where the
     local cubic fit explains the points (clean data: less bias), equal weights where it leaves
     noise (less variance); NaN noise (too few points for the fit) gives equal weights.
     """
@@ -157,6 +157,79 @@ def _blocks(order, progress, desc):
         yield slice(s, e) if isinstance(order, (int, np.integer)) else order[s:e]
         bar.update(e - s)
     bar.close()
+
+
+def _ball_search(v, finite, radius):
+    """Ball queries over the finite rows of ``v``: ``(neighbours, kernel_points, rank)``.
+
+    ``neighbours(idx)`` gives the CSR lists of the points ``v[idx]``, unsorted (the kernels do
+    not depend on the order within a list). With a uniform grid (when one fits; the same lists
+    as a k-d tree, several times faster) the lists hold rows of ``kernel_points``, the grid's
+    copy of the points in grid order, where a neighbourhood lies together in memory however
+    the input is ordered; ``rank`` gives their vertex indices. With the k-d tree fallback
+    ``kernel_points`` is ``v`` and ``rank`` None.
+    """
+    tree = ball_grid(v, radius) if len(finite) else None
+    if tree is None and len(finite):
+        tree = cKDTree(v[finite])
+    in_grid = isinstance(tree, BallGrid)
+
+    def neighbours(idx):
+        if tree is None:
+            return np.zeros(len(idx) + 1, dtype=np.int64), np.zeros(0, dtype=np.int64)
+        return ball_neighbors(tree, finite, v[idx], radius, ascending=False, positions=in_grid)
+
+    return neighbours, (tree.sorted_points if in_grid else v), (tree.order if in_grid else None)
+
+
+def _mst_normals(v, radius, neighbours, kernel_points, rank, progress):
+    """PCA normals of every point, oriented along a spanning tree whose graph joins each point
+    to its nearest neighbours, taken from the ball lists at hand (see :func:`_ball_search`)."""
+    n = len(v)
+    nv = np.full((n, 3), np.nan)
+    graph = np.full((n, _TREE_NEIGHBOURS), -1, dtype=np.int32)
+    for pos in _blocks(spatial_order(v, radius), progress, "normals"):
+        indptr, indices = neighbours(pos)
+        nv[pos] = nrm.pca_normals(kernel_points, v[pos], indptr, indices, radius)
+        near = kernels.nearest_in_lists(kernel_points, v[pos], indptr, indices, _TREE_NEIGHBOURS)
+        graph[pos] = near if rank is None else np.where(near >= 0, rank[near], -1)
+    return nrm.orient_mst(v, nv, neighbors=graph)
+
+
+def estimate_normals(points, radius, progress=False):
+    """Unit normals of a point cloud, consistently oriented: what :func:`principal_curvatures`
+    uses when it gets neither normals nor faces.
+
+    A PCA plane fit over the ball of ``radius`` around each point, then signs propagated along
+    a minimum spanning tree (Hoppe et al. 1992) and each connected piece turned outward (see
+    :func:`meshcurv.normals.orient_mst`). For a subset whose balls lie inside ``points`` (a
+    tile and its halo), the normals of the subset equal those of the whole cloud up to sign.
+
+    Parameters
+    ----------
+    points : (n, 3) float, model units (NaN rows get NaN normals and are nobody's neighbour)
+    radius : float, model units
+    progress : bool, show a progress bar
+
+    Returns
+    -------
+    (n, 3) float64 unit normals; NaN where the ball holds fewer than 3 points.
+
+    Example
+    -------
+    >>> s = meshcurv.surfaces.sphere(subdivisions=3)
+    >>> nv = meshcurv.estimate_normals(s.vertices, radius=0.3)
+    >>> bool(np.all(np.einsum("ij,ij->i", nv, s.normals) > 0.99))
+    True
+    """
+    v = np.ascontiguousarray(points, dtype=np.float64)
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise ValueError(f"points must have shape (n, 3), got {v.shape}")
+    radius = float(radius)
+    if not (np.isfinite(radius) and radius > 0):
+        raise ValueError(f"radius must be a positive number of model units, got {radius}")
+    finite = np.flatnonzero(np.isfinite(v).all(axis=1))
+    return _mst_normals(v, radius, *_ball_search(v, finite, radius), progress)
 
 
 def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_directions=8,
@@ -316,25 +389,9 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
 
         def neighbours(idx):
             return kring_neighbors(v, adjacency, radius, idx, work)
+        kernel_points, rank = v, None
     else:
-        # a uniform grid when one fits (same lists as the k-d tree, several times faster); the
-        # kernels do not depend on the order within a list, so it is left unsorted
-        tree = ball_grid(v, radius) if len(finite) else None
-        if tree is None and len(finite):
-            tree = cKDTree(v[finite])
-
-        def neighbours(idx):
-            if tree is None:
-                return np.zeros(len(idx) + 1, dtype=np.int64), np.zeros(0, dtype=np.int64)
-            return ball_neighbors(tree, finite, v[idx], radius, ascending=False,
-                                  positions=in_grid)
-
-    # The kernels read the neighbours' coordinates from ``kernel_points``: with a grid, its copy
-    # of the points in grid order (the lists then hold its rows, ``rank`` their vertex indices),
-    # where a neighbourhood lies together in memory however the input is ordered.
-    in_grid = not use_kring and isinstance(tree, BallGrid)
-    kernel_points = tree.sorted_points if in_grid else v
-    rank = tree.order if in_grid else None
+        neighbours, kernel_points, rank = _ball_search(v, finite, radius)
 
     def visiting_order(idx):
         """Order of the positions in ``idx`` to process: by grid cell for ball queries (the
@@ -374,17 +431,7 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
         return nb
 
     if tree_orient:
-        # the tree's graph: each point's nearest neighbours, taken from the lists at hand
-        nv = np.full((n, 3), np.nan)
-        graph = np.full((n, _TREE_NEIGHBOURS), -1, dtype=np.int32)
-        for pos in _blocks(visiting_order(np.arange(n)), progress, "normals"):
-            indptr, indices = neighbours(pos)
-            nv[pos] = nrm.pca_normals(kernel_points, v[pos], indptr, indices, radius)
-            near = kernels.nearest_in_lists(kernel_points, v[pos], indptr, indices,
-                                            _TREE_NEIGHBOURS)
-            graph[pos] = near if rank is None else np.where(near >= 0, rank[near], -1)
-        nrm.orient_mst(v, nv, neighbors=graph)
-        del graph
+        nv = _mst_normals(v, radius, neighbours, kernel_points, rank, progress)
         estimate = False
 
     # 3-5. directional circle fits and the Euler fit, in the compiled kernel, block by block

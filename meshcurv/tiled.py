@@ -255,7 +255,7 @@ def _prepare_worker(threads):
     (from numba's cache) on a tiny cloud, so that a tile task's memory is the tile's alone."""
     import numba
 
-    from .estimator import principal_curvatures
+    from .estimator import estimate_normals, principal_curvatures
 
     if threads:
         numba.set_num_threads(min(int(threads), numba.config.NUMBA_NUM_THREADS))
@@ -263,7 +263,7 @@ def _prepare_worker(threads):
     if not _WORKER_READY:
         g = np.stack(np.meshgrid(np.arange(4.0), np.arange(4.0), indexing="ij"), -1).reshape(-1, 2)
         pts = np.column_stack([g, 0.1 * (g ** 2).sum(axis=1)])
-        _tile_normals(pts, 1.5)
+        estimate_normals(pts, 1.5)
         principal_curvatures(pts, radius=1.5, orientation=(1.0, 1.0, 10.0), query=[5])
         _WORKER_READY = True
 
@@ -338,33 +338,6 @@ def _load_tile(work, name, chunk_ids):
 
 # ----------------------------------------------------------------------------- stage 2: normals
 
-def _tile_normals(xyz, radius):
-    """(m, 3) PCA normals at every point of tile + halo, oriented by MST propagation within it.
-
-    The own points' normals equal the unoriented normals of a whole-cloud run up to sign (their
-    balls lie inside tile + halo); the halo's outer points see a cut ball, which only matters for
-    the propagation and the vote between tiles.
-    """
-    from scipy.spatial import cKDTree
-
-    from .neighborhoods import ball_grid, ball_neighbors
-    from .normals import orient_mst, pca_normals
-
-    nv = np.full(xyz.shape, np.nan)
-    finite = np.flatnonzero(np.isfinite(xyz).all(axis=1))
-    if len(finite):
-        # the search and list order the estimator itself uses (its step 2), so that the own
-        # points' normals are the same floating-point numbers as in a whole-cloud run
-        tree = ball_grid(xyz, radius)
-        if tree is None:
-            tree = cKDTree(xyz[finite])
-        for s in range(0, len(xyz), 65536):
-            idx = np.arange(s, min(s + 65536, len(xyz)))
-            indptr, indices = ball_neighbors(tree, finite, xyz[idx], radius, ascending=False)
-            nv[idx] = pca_normals(xyz, xyz[idx], indptr, indices, radius)
-    return orient_mst(xyz, nv)
-
-
 def _normals_task(name, work, chunk_ids, radius, grid, in_path, threads=None,
                   measure_memory=False):
     """Dask task: MST-oriented normals of one tile; writes ``normals/<tile>.npz`` and ``.json``.
@@ -373,12 +346,14 @@ def _normals_task(name, work, chunk_ids, radius, grid, in_path, threads=None,
     between tiles: ``band_idx, band_normals`` (own points within the halo width of the tile's
     border) and ``halo_idx, halo_normals, halo_owner`` (the halo points, their tile).
     """
+    from .estimator import estimate_normals
+
     t0 = time.perf_counter()
     try:
         _prepare_worker(threads)
         with _TaskMemory(measure_memory) as mem:
             idx, xyz, own, _, _ = _load_tile(work, name, chunk_ids)
-            nv = _tile_normals(xyz, radius)
+            nv = estimate_normals(xyz, radius)
             rel = xyz[:, :2] - grid.tile_square(name)
             border = own & ((rel < grid.halo) | (rel > grid.tile_size - grid.halo)).any(axis=1)
             _atomic_savez(os.path.join(work, "normals", f"{name}.npz"), own_normals=nv[own],

@@ -68,8 +68,8 @@ class CurvatureResult:
     d1, d2 : (n, 3) float64, unit principal directions; ``(d1, d2, normals)`` is right-handed
     normals : (n, 3) float64, the unit normals used (given, from faces, or estimated)
     valid : (n,) bool
-    n_neighbors : (n,) int, neighbours within the radius
-    n_samples : (n,) int, circle fits used in the Euler fit (at most ``2 * n_directions``)
+    n_neighbors : (n,) int32, neighbours within the radius
+    n_samples : (n,) int32, circle fits used in the Euler fit (at most ``2 * n_directions``)
     residual : (n,) float64, RMS residual of the Euler fit, 1 / model units
     noise : (n,) float64, RMS height residual of a local cubic fit over the neighbourhood,
         model units: an estimate of the noise along the normal (NaN with fewer than 11 points)
@@ -442,9 +442,9 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
     d1 = np.full((m, 3), np.nan)
     d2 = np.full((m, 3), np.nan)
     qn = np.full((m, 3), np.nan)
-    n_samples = np.zeros(m, dtype=np.int64)
+    n_samples = np.zeros(m, dtype=np.int32)
     residual = np.full(m, np.nan)
-    n_neighbors = np.zeros(m, dtype=np.int64)
+    n_neighbors = np.zeros(m, dtype=np.int32)
     noise = np.full(m, np.nan)
     size = min(m, _BLOCK)
     b_k1, b_k2, b_res, b_noise = (np.empty(size) for _ in range(4))

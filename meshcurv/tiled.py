@@ -514,7 +514,7 @@ def _gather(work, tiles, chunk_id, first, count):
     if not out:  # a chunk of non-finite points only
         out = {k: np.full(count, np.nan) for k in ("k1", "k2", "residual", "noise")}
         out.update({k: np.full((count, 3), np.nan) for k in ("d1", "d2", "normals")})
-        out.update(n_neighbors=np.zeros(count, np.int64), n_samples=np.zeros(count, np.int64),
+        out.update(n_neighbors=np.zeros(count, np.int32), n_samples=np.zeros(count, np.int32),
                    valid=np.zeros(count, bool))
     return out
 

@@ -703,6 +703,12 @@ def main(argv=None):
     """Entry point of the ``meshcurv`` console script; returns the exit code."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    if args.command in ("annotate", "batch"):
+        from . import kernels
+
+        if not kernels.cache_is_warm():
+            print("meshcurv: compiling the numba kernels (first run after installing, about "
+                  "30 s; cached afterwards)", file=sys.stderr)
     try:
         return _COMMANDS[args.command](args)
     except CommandError as exc:

@@ -1,4 +1,5 @@
-"""Compiled numba kernels: neighbour search, local covariance, and the fused circle-fit estimator.
+"""Compiled numba kernels: neighbour search, PCA normals, local jet fits, spanning-tree
+orientation and the fused circle-fit estimator.
 
 This module is a leaf: it imports nothing from the rest of meshcurv. Every kernel works on flat
 arrays (float64 coordinates, int64 CSR neighbour lists) and loops over query points with
@@ -1368,3 +1369,15 @@ def orient_spanning_tree(normals, neighbors, levels):
                 queue[tail] = b
                 tail += 1
     return labels
+
+
+def cache_is_warm():
+    """Whether numba's on-disk cache holds the curvature kernel compiled from this source.
+
+    False means the next call compiles the kernels (the first run after installing or
+    updating meshcurv, ~30 s on 2 cores; cached afterwards). True when it cannot be told.
+    """
+    try:
+        return bool(curvature_cga._cache._cache_file._load_index())
+    except Exception:    # numba internals moved: say nothing rather than fail
+        return True

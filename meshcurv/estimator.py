@@ -217,6 +217,7 @@ def estimate_normals(points, radius, progress=False):
 
     Example
     -------
+    >>> import numpy as np, meshcurv
     >>> s = meshcurv.surfaces.sphere(subdivisions=3)
     >>> nv = meshcurv.estimate_normals(s.vertices, radius=0.3)
     >>> bool(np.all(np.einsum("ij,ij->i", nv, s.normals) > 0.99))

@@ -791,78 +791,6 @@ def kring_ball_csr(adj_ptr, adj_idx, points, query, radius, stamp, queue, tag0):
     return counts, indices
 
 
-# Grid keys pack three cell coordinates modulo 2**21; a hash table maps keys to cells. Cells a
-# multiple of 2**21 apart share a key: they merge into one bucket, which costs a few distance
-# tests where it happens (a far outlier) but loses nothing.
-_GRID_BITS = 21
-_GRID_MASK = (1 << 21) - 1
-
-
-@njit(cache=True)
-def _grid_key(cx, cy, cz):
-    return (((cx & _GRID_MASK) << (2 * _GRID_BITS)) | ((cy & _GRID_MASK) << _GRID_BITS)
-            | (cz & _GRID_MASK))
-
-
-@njit(cache=True)
-def _hash_slot(key, mask):
-    h = (key * 0x9E3779B97F4A7C15) & 0x7FFFFFFFFFFFFFFF
-    return (h >> 17) & mask
-
-
-@njit(cache=True)
-def hashed_grid_build(points, finite_index, origin, cell):
-    """Uniform grid over ``points[finite_index]`` with cells of edge ``cell``.
-
-    The sparse counterpart of :func:`cell_grid_build`, for extents where a dense grid would
-    hold too many empty cells. Returns ``(order, sorted_points, cell_start, table_keys,
-    table_cells)``: ``order`` lists the point indices cell by cell (ascending within a cell),
-    ``sorted_points`` their coordinates in that order, occupied cell ``c`` holds positions
-    ``cell_start[c]:cell_start[c + 1]``, and the open-addressing hash table
-    ``table_keys``/``table_cells`` (-1 = empty) maps packed cell keys to cells.
-    """
-    k = finite_index.shape[0]
-    keys = np.empty(k, dtype=np.int64)
-    inv = 1.0 / cell
-    for j in range(k):
-        i = finite_index[j]
-        cx = np.int64(math.floor((points[i, 0] - origin[0]) * inv))
-        cy = np.int64(math.floor((points[i, 1] - origin[1]) * inv))
-        cz = np.int64(math.floor((points[i, 2] - origin[2]) * inv))
-        keys[j] = _grid_key(cx, cy, cz)
-    srt = np.argsort(keys, kind="mergesort")  # stable: ascending point index within a cell
-    order = finite_index[srt]
-    sorted_points = np.empty((k, 3))
-    for j in range(k):
-        sorted_points[j, 0] = points[order[j], 0]
-        sorted_points[j, 1] = points[order[j], 1]
-        sorted_points[j, 2] = points[order[j], 2]
-    ncell = 0
-    for j in range(k):
-        if j == 0 or keys[srt[j]] != keys[srt[j - 1]]:
-            ncell += 1
-    cell_start = np.empty(ncell + 1, dtype=np.int64)
-    size = 16
-    while size < 2 * ncell:
-        size *= 2
-    mask = size - 1
-    table_keys = np.full(size, -1, dtype=np.int64)
-    table_cells = np.full(size, -1, dtype=np.int64)
-    c = -1
-    for j in range(k):
-        key = keys[srt[j]]
-        if j == 0 or key != keys[srt[j - 1]]:
-            c += 1
-            cell_start[c] = j
-            slot = _hash_slot(key, mask)
-            while table_keys[slot] != -1:
-                slot = (slot + 1) & mask
-            table_keys[slot] = key
-            table_cells[slot] = c
-    cell_start[ncell] = k
-    return order, sorted_points, cell_start, table_keys, table_cells
-
-
 @njit(cache=True)
 def _smallest_eigvec_jacobi3(a, out):
     """Unit eigenvector of the smallest eigenvalue of the symmetric 3x3 ``a`` (overwritten).
@@ -1019,7 +947,7 @@ def pca_normals_csr(points, query_points, indptr, indices, radius):
 
 
 # ---------------------------------------------------------------------------------------------
-# Dense cell grid for ball queries (speed; see scripts/bench.py).
+# Cell grids for ball queries (speed; see scripts/bench.py): dense, or hashed for sparse extents.
 #
 # Cells of edge >= radius numbered x-major, z fastest: the three cells (ax, ay, cz-1..cz+1) of a
 # column are consecutive, so a ball query scans 9 contiguous runs of a copy of the points sorted
@@ -1068,6 +996,78 @@ def cell_grid_build(points, finite_index, origin, cell, dims):
         sorted_points[pos, 1] = points[i, 1]
         sorted_points[pos, 2] = points[i, 2]
     return order, sorted_points, cell_start
+
+
+# Grid keys pack three cell coordinates modulo 2**21; a hash table maps keys to cells. Cells a
+# multiple of 2**21 apart share a key: they merge into one bucket, which costs a few distance
+# tests where it happens (a far outlier) but loses nothing.
+_GRID_BITS = 21
+_GRID_MASK = (1 << 21) - 1
+
+
+@njit(cache=True)
+def _grid_key(cx, cy, cz):
+    return (((cx & _GRID_MASK) << (2 * _GRID_BITS)) | ((cy & _GRID_MASK) << _GRID_BITS)
+            | (cz & _GRID_MASK))
+
+
+@njit(cache=True)
+def _hash_slot(key, mask):
+    h = (key * 0x9E3779B97F4A7C15) & 0x7FFFFFFFFFFFFFFF
+    return (h >> 17) & mask
+
+
+@njit(cache=True)
+def hashed_grid_build(points, finite_index, origin, cell):
+    """Uniform grid over ``points[finite_index]`` with cells of edge ``cell``.
+
+    The sparse counterpart of :func:`cell_grid_build`, for extents where a dense grid would
+    hold too many empty cells. Returns ``(order, sorted_points, cell_start, table_keys,
+    table_cells)``: ``order`` lists the point indices cell by cell (ascending within a cell),
+    ``sorted_points`` their coordinates in that order, occupied cell ``c`` holds positions
+    ``cell_start[c]:cell_start[c + 1]``, and the open-addressing hash table
+    ``table_keys``/``table_cells`` (-1 = empty) maps packed cell keys to cells.
+    """
+    k = finite_index.shape[0]
+    keys = np.empty(k, dtype=np.int64)
+    inv = 1.0 / cell
+    for j in range(k):
+        i = finite_index[j]
+        cx = np.int64(math.floor((points[i, 0] - origin[0]) * inv))
+        cy = np.int64(math.floor((points[i, 1] - origin[1]) * inv))
+        cz = np.int64(math.floor((points[i, 2] - origin[2]) * inv))
+        keys[j] = _grid_key(cx, cy, cz)
+    srt = np.argsort(keys, kind="mergesort")  # stable: ascending point index within a cell
+    order = finite_index[srt]
+    sorted_points = np.empty((k, 3))
+    for j in range(k):
+        sorted_points[j, 0] = points[order[j], 0]
+        sorted_points[j, 1] = points[order[j], 1]
+        sorted_points[j, 2] = points[order[j], 2]
+    ncell = 0
+    for j in range(k):
+        if j == 0 or keys[srt[j]] != keys[srt[j - 1]]:
+            ncell += 1
+    cell_start = np.empty(ncell + 1, dtype=np.int64)
+    size = 16
+    while size < 2 * ncell:
+        size *= 2
+    mask = size - 1
+    table_keys = np.full(size, -1, dtype=np.int64)
+    table_cells = np.full(size, -1, dtype=np.int64)
+    c = -1
+    for j in range(k):
+        key = keys[srt[j]]
+        if j == 0 or key != keys[srt[j - 1]]:
+            c += 1
+            cell_start[c] = j
+            slot = _hash_slot(key, mask)
+            while table_keys[slot] != -1:
+                slot = (slot + 1) & mask
+            table_keys[slot] = key
+            table_cells[slot] = c
+    cell_start[ncell] = k
+    return order, sorted_points, cell_start, table_keys, table_cells
 
 
 @njit(cache=True)

@@ -200,48 +200,48 @@ def _radius_panel(ax, radii, curves, title):
     ax.legend(fontsize=7)
 
 
-def figure8(path, trials, radii):
-    """Fig. 8: 12 points, regular vs random spacing, without and with noise (sigma 0.5)."""
+def _circle_fit_figure(path, suptitle, panel, radii, trials, runs):
+    """Two panels, the paper's |t| = 1 normalisation and meshcurv's t1 = 1, each with one
+    fitted-radius curve per run; ``runs`` lists ``(key, label, color, experiment arguments)``.
+    Returns ``{(norm, *key): quartiles, (norm, *key, "wrong sign"): shares}``."""
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(9, 3.8))
     summary = {}
     for ax, norm in zip(axes, ("unit", "tangent")):
         curves = []
-        for spacing, sigma, color in (("regular", 0.0, "C0"), ("random", 0.0, "C1"),
-                                      ("regular", 0.05, "C4"), ("random", 0.05, "C5"),
-                                      ("regular", 0.5, "C2"), ("random", 0.5, "C3")):
-            q, wrong = circle_fit_experiment(radii, 12, spacing, sigma, trials, norm)
-            summary[(norm, spacing, sigma, "wrong sign")] = wrong
-            curves.append((f"{spacing}, sigma {sigma}", q, color))
-            summary[(norm, spacing, sigma)] = q
-        _radius_panel(ax, radii, curves, f"12 points, {'|t| = 1 (paper)' if norm == 'unit' else 't1 = 1 (meshcurv)'}")
-    fig.suptitle("Fig. 8: circle fits on arcs in a window of width 4", fontsize=10)
+        for key, label, color, kwargs in runs:
+            q, wrong = circle_fit_experiment(radii, trials=trials, normalization=norm, **kwargs)
+            summary[(norm, *key, "wrong sign")] = wrong
+            summary[(norm, *key)] = q
+            curves.append((label, q, color))
+        which = "|t| = 1 (paper)" if norm == "unit" else "t1 = 1 (meshcurv)"
+        _radius_panel(ax, radii, curves, f"{panel}, {which}")
+    fig.suptitle(suptitle, fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=80)
     plt.close(fig)
     return summary
+
+
+def figure8(path, trials, radii):
+    """Fig. 8: 12 points, regular vs random spacing, without and with noise (sigma 0.5)."""
+    runs = [((spacing, sigma), f"{spacing}, sigma {sigma}", color,
+             dict(n=12, spacing=spacing, sigma=sigma))
+            for spacing, sigma, color in (("regular", 0.0, "C0"), ("random", 0.0, "C1"),
+                                          ("regular", 0.05, "C4"), ("random", 0.05, "C5"),
+                                          ("regular", 0.5, "C2"), ("random", 0.5, "C3"))]
+    return _circle_fit_figure(path, "Fig. 8: circle fits on arcs in a window of width 4",
+                              "12 points", radii, trials, runs)
 
 
 def figure9(path, trials, radii):
     """Fig. 9: 4, 12, 24 random points with noise sigma 0.5."""
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 2, figsize=(9, 3.8))
-    summary = {}
-    for ax, norm in zip(axes, ("unit", "tangent")):
-        curves = []
-        for n, color in ((4, "C0"), (12, "C1"), (24, "C2")):
-            q, wrong = circle_fit_experiment(radii, n, "random", 0.5, trials, norm, seed=n)
-            summary[(norm, n, "wrong sign")] = wrong
-            curves.append((f"{n} points", q, color))
-            summary[(norm, n)] = q
-        _radius_panel(ax, radii, curves, f"random, sigma 0.5, {'|t| = 1 (paper)' if norm == 'unit' else 't1 = 1 (meshcurv)'}")
-    fig.suptitle("Fig. 9: circle fits and the number of points", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=80)
-    plt.close(fig)
-    return summary
+    runs = [((n,), f"{n} points", color,
+             dict(n=n, spacing="random", sigma=0.5, seed=n))
+            for n, color in ((4, "C0"), (12, "C1"), (24, "C2"))]
+    return _circle_fit_figure(path, "Fig. 9: circle fits and the number of points",
+                              "random, sigma 0.5", radii, trials, runs)
 
 
 # ---------------------------------------------------------------------------------------------

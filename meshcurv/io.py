@@ -293,23 +293,31 @@ def check_distinct(input_path, output_path):
         raise MeshFileError(f"{output_path}: refusing to overwrite the input file")
 
 
+# The process's umask, read once (reading it means setting it, which is not thread-safe):
+# finished files get the usual permissions 0666 & ~umask instead of mkstemp's 0600.
+_UMASK = os.umask(0)
+os.umask(_UMASK)
+
+# Suffix of the temporary files of :func:`atomic_write` (named ``.<name>.<random>.part``).
+PARTIAL_SUFFIX = ".part"
+
+
 def atomic_write(path, write_fn):
     """Call ``write_fn(tmp_path)`` on a temporary file next to ``path``, then rename it.
 
     Readers never see a partial file: on success the temporary file replaces ``path`` in one
-    ``os.replace``; on any failure it is removed and the exception propagates.
+    ``os.replace``; on any failure it is removed and the exception propagates. The folder of
+    ``path`` is created if missing. Safe to call from several threads at once.
     """
     path = os.fspath(path)
     directory = os.path.dirname(os.path.abspath(path))
     os.makedirs(directory, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=directory, prefix="." + os.path.basename(path) + ".",
-                               suffix=".part")
+                               suffix=PARTIAL_SUFFIX)
     os.close(fd)
     try:
         write_fn(tmp)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the usual permissions
+        os.chmod(tmp, 0o666 & ~_UMASK)
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):

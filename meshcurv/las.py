@@ -30,9 +30,10 @@ never overwritten.
 
 import copy
 import os
-import tempfile
 
 import numpy as np
+
+from .io import atomic_write, check_distinct
 
 __all__ = ["LasReadError", "CURVATURE_FIELDS", "NORMAL_FIELDS", "las_point_count",
            "iter_las_chunks", "read_las_points", "result_fields", "annotate_las",
@@ -188,17 +189,7 @@ def _field_types(names, float_type):
 def _check_paths(in_path, out_path):
     if not _is_las(out_path):
         raise ValueError(f"{out_path}: the output must be a .las or .laz file")
-    if os.path.abspath(in_path) == os.path.abspath(out_path) or (
-            os.path.exists(out_path) and os.path.samefile(in_path, out_path)):
-        raise ValueError(f"{out_path}: refusing to overwrite the input file")
-
-
-def _publish(tmp, out_path):
-    """Give a finished temporary file the usual permissions and rename it over ``out_path``."""
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)
-    os.replace(tmp, out_path)
+    check_distinct(in_path, out_path)
 
 
 def annotate_las(in_path, out_path, fields_for, names, chunk_size=DEFAULT_CHUNK, float_type="f8"):
@@ -233,11 +224,9 @@ def annotate_las(in_path, out_path, fields_for, names, chunk_size=DEFAULT_CHUNK,
     header.add_extra_dims([
         laspy.ExtraBytesParams(name=n, type=t, description=_DESCRIPTIONS.get(n, ""))
         for n, t in _field_types(names, float_type)])
-    folder = os.path.dirname(os.path.abspath(out_path))
-    fd, tmp = tempfile.mkstemp(prefix="." + os.path.basename(out_path) + ".", suffix=".tmp",
-                               dir=folder)
-    try:
-        with os.fdopen(fd, "wb") as fh, laspy.open(
+
+    def write(tmp):
+        with open(tmp, "wb") as fh, laspy.open(
                 fh, mode="w", header=header, closefd=False,
                 do_compress=str(out_path).lower().endswith(".laz")) as writer:
             for first, _, _, rec in iter_las_chunks(in_path, chunk_size, with_records=True):
@@ -248,11 +237,8 @@ def annotate_las(in_path, out_path, fields_for, names, chunk_size=DEFAULT_CHUNK,
                 for name in names:
                     out.array[name] = fields[name]
                 writer.write_points(out)
-        _publish(tmp, out_path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-        raise
+
+    atomic_write(out_path, write)
 
 
 def write_las_curvature(in_path, out_path, result, normals=None, chunk_size=DEFAULT_CHUNK,

@@ -58,6 +58,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from . import las
+from .io import atomic_write
 
 __all__ = ["TileError", "TiledReport", "TileGrid", "annotate_tiled", "principal_curvatures_tiled"]
 
@@ -169,17 +170,17 @@ def _tile_name(key):
 
 
 def _atomic_savez(path, **arrays):
-    tmp = f"{path}.{os.getpid()}.tmp"
-    with open(tmp, "wb") as fh:
-        np.savez(fh, **arrays)
-    os.replace(tmp, path)
+    def write(tmp):
+        with open(tmp, "wb") as fh:     # a file object: given a name, savez appends ".npz"
+            np.savez(fh, **arrays)
+    atomic_write(path, write)
 
 
 def _atomic_json(path, obj):
-    tmp = f"{path}.{os.getpid()}.tmp"
-    with open(tmp, "w") as fh:
-        json.dump(obj, fh)
-    os.replace(tmp, path)
+    def write(tmp):
+        with open(tmp, "w") as fh:
+            json.dump(obj, fh)
+    atomic_write(path, write)
 
 
 def _read_json(path):

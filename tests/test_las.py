@@ -97,7 +97,7 @@ def test_curvature_fields_round_trip_by_name_and_input_dims_unchanged(las_file, 
     assert got.header.point_format.id == src.header.point_format.id
     assert list(got.point_format.extra_dimension_names) == (
         ["reflectance"] + list(las.CURVATURE_FIELDS) + list(las.NORMAL_FIELDS))
-    assert not [f for f in os.listdir(tmp_path) if f.endswith(".tmp")]
+    assert not [f for f in os.listdir(tmp_path) if f.endswith(".part")]
 
 
 def test_float32_fields_hold_the_rounded_values(las_file, tmp_path):
@@ -163,3 +163,12 @@ def test_bad_requests_are_refused(las_file, tmp_path):
     with pytest.raises(ValueError, match="already has dimension"):
         las.write_las_curvature(once, str(tmp_path / "twice.las"), res)
     assert not os.path.exists(tmp_path / "twice.las")
+
+
+def test_las_output_folder_is_created_and_holds_only_the_output(las_file, tmp_path):
+    path, xyz = las_file
+    res = meshcurv.principal_curvatures(xyz, radius=2.0, orientation=VIEWPOINT)
+    out = tmp_path / "new" / "annotated.laz"
+    las.write_las_curvature(path, str(out), res)
+    assert laspy.read(str(out)).header.point_count == len(xyz)
+    assert os.listdir(out.parent) == ["annotated.laz"]

@@ -280,7 +280,7 @@ def test_failed_tile_is_named_leaves_no_output_and_rerun_resumes(client, laz_inp
     with pytest.raises(TileError, match=rf"tile {broken} of .*scan\.laz"):
         annotate_tiled(path, out, radius, 30.0, **kw)
     assert not os.path.exists(out)
-    assert not [f for f in os.listdir(tmp_path) if f.endswith(".tmp")]
+    assert not [f for f in os.listdir(tmp_path) if f.endswith(".part")]
     # repaired, the rerun computes the one missing tile and reuses the 15 others
     os.replace(piece + ".good", piece)
     report = annotate_tiled(path, out, radius, 30.0, **kw)

@@ -2,8 +2,8 @@
 orientation and the fused circle-fit estimator.
 
 This module is a leaf: it imports nothing from the rest of meshcurv. Every kernel works on flat
-arrays (float64 coordinates, int64 CSR neighbour lists) and loops over query points with
-``prange``; no kernel allocates per query point. The plain numpy reference of the same estimator
+arrays (float64 coordinates, CSR neighbour lists ``(indptr, indices)``); the per-point kernels
+loop over query points with ``prange`` and none allocates per query point. The plain numpy reference of the same estimator
 lives in :mod:`meshcurv.reference` and the test-suite checks the two agree.
 """
 
@@ -31,87 +31,96 @@ PLANE_OFFSET = 0.25
 CHUNK = 256
 
 @njit(cache=True)
-def _smallest_eigvec_sym3(a11, a12, a13, a22, a23, a33, out):
-    """Unit eigenvector of the smallest eigenvalue of a symmetric 3x3 matrix; returns the eigenvalue.
+def _smallest_eigvec_jacobi3(a, out):
+    """Unit eigenvector of the smallest eigenvalue of the symmetric 3x3 ``a`` (overwritten).
 
-    Eigenvalues in closed form (trigonometric solution of the characteristic cubic), then the
-    eigenvector as the largest cross product of two rows of (A - lambda I), followed by one step
-    of inverse-free refinement (Rayleigh quotient) to recover the precision the cubic loses.
+    Cyclic Jacobi rotations to machine precision (as accurate as LAPACK's ``eigh`` here, unlike
+    a closed-form cubic); the rotations are accumulated in the local ``v00 .. v22``.
     """
-    scale = max(abs(a11), abs(a12), abs(a13), abs(a22), abs(a23), abs(a33))
-    if scale == 0.0 or not np.isfinite(scale):
-        out[0] = np.nan
-        out[1] = np.nan
-        out[2] = np.nan
-        return np.nan
-    a11 /= scale
-    a12 /= scale
-    a13 /= scale
-    a22 /= scale
-    a23 /= scale
-    a33 /= scale
-    q = (a11 + a22 + a33) / 3.0
-    p1 = a12 * a12 + a13 * a13 + a23 * a23
-    b11 = a11 - q
-    b22 = a22 - q
-    b33 = a33 - q
-    p2 = b11 * b11 + b22 * b22 + b33 * b33 + 2.0 * p1
-    p = math.sqrt(p2 / 6.0)
-    if p == 0.0:
-        out[0] = 1.0
-        out[1] = 0.0
-        out[2] = 0.0
-        return q * scale
-    det = (b11 * (b22 * b33 - a23 * a23) - a12 * (a12 * b33 - a23 * a13)
-           + a13 * (a12 * a23 - b22 * a13)) / (p * p * p)
-    r = min(max(det / 2.0, -1.0), 1.0)
-    phi = math.acos(r) / 3.0
-    lam = q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0)
-    best = -1.0
-    for it in range(2):
-        # rows of A - lam I
-        r0x, r0y, r0z = a11 - lam, a12, a13
-        r1x, r1y, r1z = a12, a22 - lam, a23
-        r2x, r2y, r2z = a13, a23, a33 - lam
-        best = -1.0
-        vx = vy = vz = 0.0
-        cx = r0y * r1z - r0z * r1y
-        cy = r0z * r1x - r0x * r1z
-        cz = r0x * r1y - r0y * r1x
-        nrm = cx * cx + cy * cy + cz * cz
-        if nrm > best:
-            best, vx, vy, vz = nrm, cx, cy, cz
-        cx = r0y * r2z - r0z * r2y
-        cy = r0z * r2x - r0x * r2z
-        cz = r0x * r2y - r0y * r2x
-        nrm = cx * cx + cy * cy + cz * cz
-        if nrm > best:
-            best, vx, vy, vz = nrm, cx, cy, cz
-        cx = r1y * r2z - r1z * r2y
-        cy = r1z * r2x - r1x * r2z
-        cz = r1x * r2y - r1y * r2x
-        nrm = cx * cx + cy * cy + cz * cz
-        if nrm > best:
-            best, vx, vy, vz = nrm, cx, cy, cz
-        if best <= 0.0:
+    v00 = 1.0
+    v01 = 0.0
+    v02 = 0.0
+    v10 = 0.0
+    v11 = 1.0
+    v12 = 0.0
+    v20 = 0.0
+    v21 = 0.0
+    v22 = 1.0
+    for sweep in range(50):
+        off = a[0, 1] * a[0, 1] + a[0, 2] * a[0, 2] + a[1, 2] * a[1, 2]
+        diag = a[0, 0] * a[0, 0] + a[1, 1] * a[1, 1] + a[2, 2] * a[2, 2]
+        if off <= 1e-36 * diag or off == 0.0:
             break
-        inv = 1.0 / math.sqrt(best)
-        vx *= inv
-        vy *= inv
-        vz *= inv
-        out[0] = vx
-        out[1] = vy
-        out[2] = vz
-        # Rayleigh quotient of the current vector: a more precise eigenvalue for the second pass.
-        lam = (vx * (a11 * vx + a12 * vy + a13 * vz) + vy * (a12 * vx + a22 * vy + a23 * vz)
-               + vz * (a13 * vx + a23 * vy + a33 * vz))
-    if best <= 0.0:
-        # (A - lam I) has rank < 2: a repeated smallest eigenvalue; any vector orthogonal to a
-        # non-zero row spans the eigenspace. Pick the one closest to e1 for determinism.
-        out[0] = 1.0
-        out[1] = 0.0
-        out[2] = 0.0
-    return lam * scale
+        for pq in range(3):
+            if pq == 0:
+                p, q, r = 0, 1, 2
+            elif pq == 1:
+                p, q, r = 0, 2, 1
+            else:
+                p, q, r = 1, 2, 0
+            apq = a[p, q]
+            if apq == 0.0:
+                continue
+            # rotation angle that zeroes a[p, q] (Golub & Van Loan, sym.schur2)
+            tau = (a[q, q] - a[p, p]) / (2.0 * apq)
+            if tau >= 0.0:
+                t = 1.0 / (tau + math.sqrt(1.0 + tau * tau))
+            else:
+                t = -1.0 / (-tau + math.sqrt(1.0 + tau * tau))
+            c = 1.0 / math.sqrt(1.0 + t * t)
+            s = t * c
+            app = a[p, p]
+            aqq = a[q, q]
+            arp = a[r, p]
+            arq = a[r, q]
+            a[p, p] = app - t * apq
+            a[q, q] = aqq + t * apq
+            a[p, q] = 0.0
+            a[q, p] = 0.0
+            a[r, p] = c * arp - s * arq
+            a[p, r] = a[r, p]
+            a[r, q] = s * arp + c * arq
+            a[q, r] = a[r, q]
+            # columns p, q of the accumulated rotation V
+            if p == 0 and q == 1:
+                v00, v01 = c * v00 - s * v01, s * v00 + c * v01
+                v10, v11 = c * v10 - s * v11, s * v10 + c * v11
+                v20, v21 = c * v20 - s * v21, s * v20 + c * v21
+            elif p == 0:
+                v00, v02 = c * v00 - s * v02, s * v00 + c * v02
+                v10, v12 = c * v10 - s * v12, s * v10 + c * v12
+                v20, v22 = c * v20 - s * v22, s * v20 + c * v22
+            else:
+                v01, v02 = c * v01 - s * v02, s * v01 + c * v02
+                v11, v12 = c * v11 - s * v12, s * v11 + c * v12
+                v21, v22 = c * v21 - s * v22, s * v21 + c * v22
+    k = 0
+    if a[1, 1] < a[k, k]:
+        k = 1
+    if a[2, 2] < a[k, k]:
+        k = 2
+    if k == 0:
+        x, y, z = v00, v10, v20
+    elif k == 1:
+        x, y, z = v01, v11, v21
+    else:
+        x, y, z = v02, v12, v22
+    s = 1.0 / math.sqrt(x * x + y * y + z * z)
+    out[0] = x * s
+    out[1] = y * s
+    out[2] = z * s
+
+
+@njit(cache=True)
+def _ball_offset(points, k, x0, x1, x2, r2max, inv_r):
+    """Offset of ``points[k]`` from (x0, x1, x2) in units of the radius, and its squared length:
+    ``(inside, qx, qy, qz, r2)``. ``inside`` is False for a coincident point (the query point
+    itself) and beyond the radius: the neighbourhood every fit here works on."""
+    qx = points[k, 0] - x0
+    qy = points[k, 1] - x1
+    qz = points[k, 2] - x2
+    d2 = qx * qx + qy * qy + qz * qz
+    return d2 > 0.0 and d2 <= r2max, qx * inv_r, qy * inv_r, qz * inv_r, d2 * inv_r * inv_r
 
 
 @njit(cache=True)
@@ -218,17 +227,17 @@ def _sample_design(acc, k, corrected, cos2t, sin2t):
 
 
 @njit(cache=True)
-def _circle_fit(acc, k, unit_norm, ev):
-    """CGA circle fit of half-set k from its accumulator row: (kappa, squared height residuals).
+def _circle_fit(acc, k, unit_norm, b, ev):
+    """CGA circle fit of half-set k from its accumulator row: kappa (scaled units), NaN if
+    degenerate.
 
     B = [[Shh, -Sh, -Shr/2], [-Sh, N, Sr/2], [-Shr/2, Sr/2, Srr/4]] and the sphere is
     t = (t1, t2, t3) with kappa = -t3 / t1 (scaled units). ``unit_norm`` minimises t^T B t over
-    |t| = 1 (the paper: smallest eigenvector). Otherwise over t1 = 1, the generalised
-    eigenproblem B t = lambda diag(1, 0, 0) t, i.e. the 2x2 system
-    [[N, Sr/2], [Sr/2, Srr/4]] (t2, t3) = (Sh, Shr/2): the same sphere on exact data, but it
-    cannot drift to the spheres centred at x (t1 -> 0) that send |kappa| to infinity under noise.
-    The residual is the weighted sum of squared height residuals (P.S = t1 * height
-    residual), in units of radius^2. NaN if degenerate.
+    |t| = 1 (the paper: smallest eigenvector; ``b`` (3, 3) and ``ev`` (3,) are scratch).
+    Otherwise over t1 = 1, the generalised eigenproblem B t = lambda diag(1, 0, 0) t, i.e. the
+    2x2 system [[N, Sr/2], [Sr/2, Srr/4]] (t2, t3) = (Sh, Shr/2): the same sphere on exact data,
+    but it cannot drift to the spheres centred at x (t1 -> 0) that send |kappa| to infinity
+    under noise.
     """
     b11 = acc[k, _HH]
     b12 = -acc[k, _H]
@@ -237,17 +246,17 @@ def _circle_fit(acc, k, unit_norm, ev):
     b23 = 0.5 * acc[k, _R]
     b33 = 0.25 * acc[k, _RR]
     if unit_norm:
-        lam = _smallest_eigvec_sym3(b11, b12, b13, b22, b23, b33, ev)
-        if not (abs(ev[0]) > 1e-12 * abs(ev[2])) or not np.isfinite(lam):
-            return np.nan, np.nan
-        return -ev[2] / ev[0], max(lam, 0.0) / (ev[0] * ev[0])
+        b[0, 0], b[0, 1], b[0, 2] = b11, b12, b13
+        b[1, 0], b[1, 1], b[1, 2] = b12, b22, b23
+        b[2, 0], b[2, 1], b[2, 2] = b13, b23, b33
+        _smallest_eigvec_jacobi3(b, ev)
+        if not (abs(ev[0]) > 1e-12 * abs(ev[2])):
+            return np.nan
+        return -ev[2] / ev[0]
     det = b22 * b33 - b23 * b23
     if not det > 1e-14 * b22 * b33:
-        return np.nan, np.nan
-    t2 = (-b12 * b33 + b13 * b23) / det
-    t3 = (-b13 * b22 + b12 * b23) / det
-    ss = b11 + b12 * t2 + b13 * t3  # minimum of t^T B t at t1 = 1
-    return -t3, max(ss, 0.0)
+        return np.nan
+    return -(-b13 * b22 + b12 * b23) / det
 
 
 @njit(cache=True)
@@ -282,12 +291,12 @@ def _model(rows, s, npar, sol):
 @njit(cache=True)
 def _estimate_one(points, nbr, lo, hi, x, n, radius, ndir, slab, min_points, min_spread,
                   beta, unit_norm, corrected, half_frequency, robust,
-                  ca, sa, dirs, acc, kappa, rows, active, scratch, mat, rhs, sol, ev, tu, tv,
+                  ca, sa, dirs, acc, kappa, rows, active, scratch, mat, rhs, sol, b3, ev, tu, tv,
                   res, rank):
     """Circle fits in 2*ndir half-sets around one point, then the Euler model fit.
 
-    Writes (k1, k2, theta1, n_used_samples, residual_rms, n_neighbours) into ``res`` and the
-    frame into tu, tv. Lengths inside are in units of ``radius``. The points' weights are
+    Writes (k1, k2, theta1, n_used_samples, residual_rms, n_neighbours) into ``res`` (which
+    the caller resets to NaN, NaN, NaN, 0, NaN, 0) and the frame into tu, tv. Lengths inside are in units of ``radius``. The points' weights are
     ``(1 - beta) + beta (1 - r^2)^WEIGHT_POWER``: equal weights at beta = 0, distance weights
     at beta = 1.
     """
@@ -295,30 +304,18 @@ def _estimate_one(points, nbr, lo, hi, x, n, radius, ndir, slab, min_points, min
     for k in range(nh):
         for c in range(N_ACC):
             acc[k, c] = 0.0
-    for a in range(6):
-        res[a] = np.nan
-    res[3] = 0.0
-    res[5] = 0.0
     inv_r = 1.0 / radius
     r2max = radius * radius
     _tangent_frame(points, nbr, lo, hi, x, n, r2max, tu, tv, rank)
     n_nbr = 0
     for j in range(lo, hi):
-        kk = nbr[j]
-        qx = points[kk, 0] - x[0]
-        qy = points[kk, 1] - x[1]
-        qz = points[kk, 2] - x[2]
-        d2 = qx * qx + qy * qy + qz * qz
-        if not (d2 > 0.0 and d2 <= r2max):
+        inside, qx, qy, qz, r2 = _ball_offset(points, nbr[j], x[0], x[1], x[2], r2max, inv_r)
+        if not inside:
             continue
         n_nbr += 1
-        qx *= inv_r
-        qy *= inv_r
-        qz *= inv_r
         u = qx * tu[0] + qy * tu[1] + qz * tu[2]
         v = qx * tv[0] + qy * tv[1] + qz * tv[2]
         h = qx * n[0] + qy * n[1] + qz * n[2]
-        r2 = d2 * inv_r * inv_r
         t2 = u * u + v * v
         if t2 <= 0.0:
             continue
@@ -357,7 +354,7 @@ def _estimate_one(points, nbr, lo, hi, x, n, radius, ndir, slab, min_points, min
             if acc[k, _CNT] < min_points or acc[k, _EMAX] < min_spread:
                 continue
             acc[k, _N] += 1.0
-            kap, _ = _circle_fit(acc, k, unit_norm, ev)
+            kap = _circle_fit(acc, k, unit_norm, b3, ev)
             if not np.isfinite(kap):
                 continue
             kappa[m] = kap
@@ -428,7 +425,8 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
     blend : (m,) float64 in [0, 1], per query point: 0 equal weights, 1 distance weights
         (1 - r^2 / radius^2)^WEIGHT_POWER, between the two a mix of both weight functions
     unit_norm : bool, circle fits normalised by |t| = 1 (the paper) instead of t1 = 1
-    corrected, half_frequency, robust : bool, see :func:`meshcurv.principal_curvatures`
+    corrected, half_frequency, robust : bool, ``section_blend``, ``half_frequency`` and
+        ``robust`` of :func:`meshcurv.principal_curvatures`
     Outputs k1, k2 (m,), d1, d2 (m, 3), n_samples, residual, n_neighbors (m,) are written in
     place; NaN where no estimate is possible.
     rank : (n,) int64, optional, the input index of each row of ``points`` when they are stored
@@ -463,6 +461,7 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
         mat = np.empty((5, 5))
         rhs = np.empty(5)
         sol = np.empty(5)
+        b3 = np.empty((3, 3))
         ev = np.empty(3)
         tu = np.empty(3)
         tv = np.empty(3)
@@ -473,6 +472,10 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
             for a in range(3):
                 x[a] = query_points[q, a]
                 n[a] = query_normals[q, a]
+            for a in range(6):
+                res[a] = np.nan
+            res[3] = 0.0
+            res[5] = 0.0
             nn = math.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
             if nn > 0.0 and np.isfinite(nn) and np.isfinite(x[0] + x[1] + x[2]):
                 for a in range(3):
@@ -480,12 +483,7 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
                 _estimate_one(points, indices, indptr[q], indptr[q + 1], x, n, radius, ndir,
                               slab, min_points, min_spread, blend[q], unit_norm, corrected,
                               half_frequency, robust, ca, sa, dirs, acc, kappa, rows, active,
-                              scratch, mat, rhs, sol, ev, tu, tv, res, rank)
-            else:
-                for a in range(6):
-                    res[a] = np.nan
-                res[3] = 0.0
-                res[5] = 0.0
+                              scratch, mat, rhs, sol, b3, ev, tu, tv, res, rank)
             n_samples[q] = res[3]
             residual[q] = res[4]
             n_neighbors[q] = res[5]
@@ -581,20 +579,14 @@ def local_jet(points, query_points, normals, indptr, indices, radius, refine, no
             swhh = 0.0
             count = 1
             for j in range(indptr[q], indptr[q + 1]):
-                k = indices[j]
-                qx = points[k, 0] - x0
-                qy = points[k, 1] - x1
-                qz = points[k, 2] - x2
-                d2 = qx * qx + qy * qy + qz * qz
-                if not (d2 > 0.0 and d2 <= r2max):
+                inside, qx, qy, qz, r2 = _ball_offset(points, indices[j], x0, x1, x2, r2max,
+                                                      inv_r)
+                if not inside:
                     continue
-                qx *= inv_r
-                qy *= inv_r
-                qz *= inv_r
                 u = qx * t0 + qy * t1 + qz * t2
                 v = qx * b0 + qy * b1 + qz * b2
                 h = qx * n0 + qy * n1 + qz * n2
-                w = 1.0 - d2 * inv_r * inv_r
+                w = 1.0 - r2
                 wua = w
                 for a in range(7):
                     wuv = wua
@@ -791,87 +783,6 @@ def kring_ball_csr(adj_ptr, adj_idx, points, query, radius, stamp, queue, tag0):
     return counts, indices
 
 
-@njit(cache=True)
-def _smallest_eigvec_jacobi3(a, out):
-    """Unit eigenvector of the smallest eigenvalue of the symmetric 3x3 ``a`` (overwritten).
-
-    Cyclic Jacobi rotations to machine precision (as accurate as LAPACK's ``eigh`` here, unlike
-    the closed-form cubic); the rotations are accumulated in ``out``'s scratch frame.
-    """
-    v00 = 1.0
-    v01 = 0.0
-    v02 = 0.0
-    v10 = 0.0
-    v11 = 1.0
-    v12 = 0.0
-    v20 = 0.0
-    v21 = 0.0
-    v22 = 1.0
-    for sweep in range(50):
-        off = a[0, 1] * a[0, 1] + a[0, 2] * a[0, 2] + a[1, 2] * a[1, 2]
-        diag = a[0, 0] * a[0, 0] + a[1, 1] * a[1, 1] + a[2, 2] * a[2, 2]
-        if off <= 1e-36 * diag or off == 0.0:
-            break
-        for pq in range(3):
-            if pq == 0:
-                p, q, r = 0, 1, 2
-            elif pq == 1:
-                p, q, r = 0, 2, 1
-            else:
-                p, q, r = 1, 2, 0
-            apq = a[p, q]
-            if apq == 0.0:
-                continue
-            # rotation angle that zeroes a[p, q] (Golub & Van Loan, sym.schur2)
-            tau = (a[q, q] - a[p, p]) / (2.0 * apq)
-            if tau >= 0.0:
-                t = 1.0 / (tau + math.sqrt(1.0 + tau * tau))
-            else:
-                t = -1.0 / (-tau + math.sqrt(1.0 + tau * tau))
-            c = 1.0 / math.sqrt(1.0 + t * t)
-            s = t * c
-            app = a[p, p]
-            aqq = a[q, q]
-            arp = a[r, p]
-            arq = a[r, q]
-            a[p, p] = app - t * apq
-            a[q, q] = aqq + t * apq
-            a[p, q] = 0.0
-            a[q, p] = 0.0
-            a[r, p] = c * arp - s * arq
-            a[p, r] = a[r, p]
-            a[r, q] = s * arp + c * arq
-            a[q, r] = a[r, q]
-            # columns p, q of the accumulated rotation V
-            if p == 0 and q == 1:
-                v00, v01 = c * v00 - s * v01, s * v00 + c * v01
-                v10, v11 = c * v10 - s * v11, s * v10 + c * v11
-                v20, v21 = c * v20 - s * v21, s * v20 + c * v21
-            elif p == 0:
-                v00, v02 = c * v00 - s * v02, s * v00 + c * v02
-                v10, v12 = c * v10 - s * v12, s * v10 + c * v12
-                v20, v22 = c * v20 - s * v22, s * v20 + c * v22
-            else:
-                v01, v02 = c * v01 - s * v02, s * v01 + c * v02
-                v11, v12 = c * v11 - s * v12, s * v11 + c * v12
-                v21, v22 = c * v21 - s * v22, s * v21 + c * v22
-    k = 0
-    if a[1, 1] < a[k, k]:
-        k = 1
-    if a[2, 2] < a[k, k]:
-        k = 2
-    if k == 0:
-        x, y, z = v00, v10, v20
-    elif k == 1:
-        x, y, z = v01, v11, v21
-    else:
-        x, y, z = v02, v12, v22
-    s = 1.0 / math.sqrt(x * x + y * y + z * z)
-    out[0] = x * s
-    out[1] = y * s
-    out[2] = z * s
-
-
 @njit(parallel=True, cache=True)
 def pca_normals_csr(points, query_points, indptr, indices, radius):
     """Unit normals (m, 3) of the least-squares plane through each query point's neighbours.
@@ -886,11 +797,11 @@ def pca_normals_csr(points, query_points, indptr, indices, radius):
     out = np.full((m, 3), np.nan)
     r2max = radius * radius
     inv_r = 1.0 / radius
-    nchunks = (m + 255) // 256
+    nchunks = (m + CHUNK - 1) // CHUNK
     for ch in prange(nchunks):
         cov = np.empty((3, 3))
         ev = np.empty(3)
-        for q in range(ch * 256, min(m, (ch + 1) * 256)):
+        for q in range(ch * CHUNK, min(m, (ch + 1) * CHUNK)):
             x0 = query_points[q, 0]
             x1 = query_points[q, 1]
             x2 = query_points[q, 2]
@@ -898,16 +809,9 @@ def pca_normals_csr(points, query_points, indptr, indices, radius):
             s00 = s01 = s02 = s11 = s12 = s22 = 0.0
             c = 1
             for j in range(indptr[q], indptr[q + 1]):
-                k = indices[j]
-                a = points[k, 0] - x0
-                b = points[k, 1] - x1
-                d = points[k, 2] - x2
-                dd = a * a + b * b + d * d
-                if not (dd > 0.0 and dd <= r2max):
+                inside, a, b, d, _ = _ball_offset(points, indices[j], x0, x1, x2, r2max, inv_r)
+                if not inside:
                     continue
-                a *= inv_r
-                b *= inv_r
-                d *= inv_r
                 c += 1
                 s0 += a
                 s1 += b
@@ -1002,7 +906,7 @@ def cell_grid_build(points, finite_index, origin, cell, dims):
 # multiple of 2**21 apart share a key: they merge into one bucket, which costs a few distance
 # tests where it happens (a far outlier) but loses nothing.
 _GRID_BITS = 21
-_GRID_MASK = (1 << 21) - 1
+_GRID_MASK = (1 << _GRID_BITS) - 1
 
 
 @njit(cache=True)

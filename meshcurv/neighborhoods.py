@@ -175,8 +175,9 @@ def ball_neighbors(tree, finite_index, query_points, radius, ascending=True, pos
 
     Returns
     -------
-    indptr : (m + 1,) int64; indices : (nnz,) int64 vertex indices, ascending per query point
-    (both searches return the same lists)
+    indptr : (m + 1,) int64; indices : (nnz,) int64 vertex indices (grid rows with
+    ``positions``), ascending per query point unless ``ascending`` is False (both searches
+    return the same sets)
     """
     if isinstance(tree, BallGrid):
         if float(radius) != tree.radius:

@@ -37,8 +37,8 @@ def curvature_at_point(x, n, neighbours, radius, n_directions=8, slab=0.25, min_
         beyond ``radius`` are ignored); the first one at least 30 degrees off the normal sets
         the tangent frame, as the lowest-index one does in the kernel
     radius : float, model units; ``slab`` and ``min_spread`` are fractions of it
-    blend : float in [0, 1], weights ``(1 - blend) + blend (1 - r^2 / radius^2)^4`` (see
-        :func:`meshcurv.estimator.weight_blend`)
+    blend : float in [0, 1], weights ``(1 - blend) + blend (1 - r^2 / radius^2)^WEIGHT_POWER``
+        (see :func:`meshcurv.estimator.weight_blend`)
     other parameters : as in :func:`meshcurv.principal_curvatures`
 
     Returns

@@ -20,11 +20,13 @@ Pipeline, every stage resumable from a work folder (``OUT.meshcurv-work`` next t
    estimates at its own points and writes the results per input chunk
    (``results/t_IX_IY/cNNNNNN.npz``) and then a ``done.json`` marker;
 4. write: the driver streams the input once more and writes the output in input order, through
-   a temporary file renamed at the end (never a partial output). The work folder is removed.
+   a temporary file renamed at the end (never a partial output). The work folder is removed
+   unless ``keep_work`` is set.
 
 A rerun with the same input and parameters skips finished chunks and tiles; other parameters or a
 changed input start afresh. Memory of a tile task is bounded by the points of one tile + halo
-(about ``density * (tile_size + 2 * halo)^2``); the driver holds one chunk at a time.
+(about ``density * (tile_size + 2 * halo)^2``); the driver of :func:`annotate_tiled` holds one
+chunk at a time (unless asked to return the result).
 
 Normal orientation across tiles
 -------------------------------
@@ -38,7 +40,8 @@ Normal orientation across tiles
   flips whole tiles along a maximum spanning tree of the tile graph (strongest overlaps first)
   and finally flips each connected group of tiles so its normals point away from its centroid on
   average, the rule ``orient_mst`` applies to a whole cloud. The curvature pass runs with the
-  flipped normals, so its values equal an untiled run with the same normals; the normals agree
+  flipped normals (refined like estimated ones), so its values equal an untiled run given the
+  same normals with ``refine_normals=True``; the normals agree
   with an untiled MST run wherever the propagation itself agrees (smooth, well-sampled surfaces).
 
 >>> from meshcurv.tiled import annotate_tiled                                  # doctest: +SKIP
@@ -88,7 +91,13 @@ class TileGrid:
 
     @classmethod
     def for_radius(cls, origin, tile_size, radius):
-        """Grid whose halo covers ``radius`` with a margin against rounding."""
+        """Grid whose halo covers ``radius`` with a margin against rounding.
+
+        Raises ValueError for tiles narrower than the radius: their work would be mostly halo,
+        and every point would belong to many tiles.
+        """
+        if not tile_size >= radius:
+            raise ValueError(f"tile_size ({tile_size}) must be at least the radius ({radius})")
         # the absolute term covers the rounding of (x - origin) / tile_size, ~1e-16 tile sizes
         halo = radius * (1 + _HALO_MARGIN) + 1e-9 * tile_size
         return cls(origin=(float(origin[0]), float(origin[1])), tile_size=float(tile_size),
@@ -444,17 +453,6 @@ def _tile_flips(work, names):
 
 # ----------------------------------------------------------------------------- stage 3: curvature
 
-def _estimate_tile(xyz, own, normals, radius, orientation, options):
-    """CurvatureResult at the own points of one tile + halo (rows in tile order)."""
-    from .estimator import principal_curvatures
-
-    query = np.flatnonzero(own)
-    if normals is not None:
-        return principal_curvatures(xyz, normals=normals, radius=radius, query=query, **options)
-    return principal_curvatures(xyz, radius=radius, orientation=orientation, query=query,
-                                **options)
-
-
 def _result_rows(res):
     """The per-row arrays of a CurvatureResult, ``{name: (m, ...) array}``."""
     m = len(res)
@@ -465,8 +463,12 @@ def _curvature_task(name, work, chunk_ids, radius, orientation, options, in_path
                     threads=None, measure_memory=False):
     """Dask task: estimate one tile; writes results per input chunk and ``done.json``.
 
-    With ``flip`` (``orientation="mst"``) the tile's stored MST normals times ``flip`` are used.
+    With ``flip`` (``orientation="mst"``) the tile's stored MST normals times ``flip`` are used,
+    refined as the estimator refines its own estimated normals (``refine_normals=True`` unless
+    the options say otherwise).
     """
+    from .estimator import principal_curvatures
+
     t0 = time.perf_counter()
     try:
         _prepare_worker(threads)
@@ -479,7 +481,9 @@ def _curvature_task(name, work, chunk_ids, radius, orientation, options, in_path
                 # these normals were estimated: treat them as the estimator treats its own
                 if options.get("refine_normals") is None:
                     options = dict(options, refine_normals=True)
-            res = _estimate_tile(xyz, own, normals, radius, orientation, options)
+            res = principal_curvatures(xyz, normals=normals, radius=radius,
+                                       orientation=orientation, query=np.flatnonzero(own),
+                                       **options)
             rows = _result_rows(res)
             out = os.path.join(work, "results", name)
             os.makedirs(out, exist_ok=True)
@@ -681,10 +685,11 @@ def _process(client, threads, work, grid, radius, orientation, options, chunk_jo
     return {cid: [n for n, (n_own, _) in s.items() if n_own] for cid, s in summaries.items()}
 
 
-def _default_tile_size(n_points, extent, target=1_000_000):
-    """Side (model units) of square tiles holding about ``target`` points of a uniform cloud."""
-    area = max(float(extent[0]) * float(extent[1]), 1e-300)
-    return float(np.sqrt(area * target / max(n_points, 1)))
+def _default_tile_size(n_points, extent, radius, target=1_000_000):
+    """Side (model units) of square tiles holding about ``target`` points of a uniform cloud,
+    and at least 4 radii (a cloud flat in x or y counts as one radius wide)."""
+    area = max(float(extent[0]), radius) * max(float(extent[1]), radius)
+    return max(float(np.sqrt(area * target / max(n_points, 1))), 4.0 * radius)
 
 
 def annotate_tiled(in_path, out_path, radius=None, tile_size=None, *, orientation="mst",
@@ -763,7 +768,7 @@ def annotate_tiled(in_path, out_path, radius=None, tile_size=None, *, orientatio
     if not (np.isfinite(radius) and radius > 0):
         raise ValueError(f"radius must be a positive number of model units, got {radius}")
     if tile_size is None:
-        tile_size = _default_tile_size(n_points, maxs[:2] - mins[:2])
+        tile_size = _default_tile_size(n_points, maxs[:2] - mins[:2], radius)
     tile_size = float(tile_size)
     if not (np.isfinite(tile_size) and tile_size > 0):
         raise ValueError(f"tile_size must be a positive number of model units, got {tile_size}")

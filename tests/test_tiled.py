@@ -352,7 +352,13 @@ def test_bad_arguments_are_refused_before_any_work(laz_input, tmp_path):
         annotate_tiled(path, out, radius, 30.0, orientation="centroid")
     with pytest.raises(ValueError, match="at least the radius"):
         annotate_tiled(path, out, radius, 0.5 * radius)
-    assert not os.path.exists(out)
+    with pytest.raises(ValueError, match="tile_size"):
+        annotate_tiled(path, out, radius, -1.0)
+    with pytest.raises(ValueError, match="radius in model units"):
+        annotate_tiled(path, out, "auto", 30.0)
+    with pytest.raises(ValueError, match="sets"):
+        principal_curvatures_tiled(xyz, radius, 30.0, query=[0])
+    assert os.listdir(tmp_path) == []
 
 
 def test_default_tile_size_of_a_flat_cloud_is_a_few_radii_not_zero():
@@ -362,10 +368,3 @@ def test_default_tile_size_of_a_flat_cloud_is_a_few_radii_not_zero():
     assert _default_tile_size(10 ** 6, (100.0, 0.0), radius=0.5) == pytest.approx(50 ** 0.5)
     assert _default_tile_size(10 ** 6, (1.0, 0.0), radius=0.5) == 2.0         # floor: 4 radii
     assert _default_tile_size(4 * 10 ** 6, (400.0, 400.0), radius=0.5) == 200.0
-    with pytest.raises(ValueError, match="tile_size"):
-        annotate_tiled(path, out, radius, -1.0)
-    with pytest.raises(ValueError, match="radius in model units"):
-        annotate_tiled(path, out, "auto", 30.0)
-    with pytest.raises(ValueError, match="sets"):
-        principal_curvatures_tiled(xyz, radius, 30.0, query=[0])
-    assert os.listdir(tmp_path) == []

@@ -30,11 +30,13 @@ from . import shape
 
 __all__ = ["MeshData", "MeshFileError", "READERS", "WRITERS", "register_reader",
            "register_writer", "read", "write", "write_ply", "write_annotated", "atomic_write",
-           "check_distinct", "bbox_diagonal", "ANNOTATED_FIELDS"]
+           "check_distinct", "bbox_diagonal", "CURVATURE_FIELDS", "ANNOTATED_FIELDS",
+           "curvature_fields"]
 
+# Per-vertex curvature fields of every annotated file (PLY properties, LAS extra bytes).
+CURVATURE_FIELDS = shape.FIELDS + ("valid", "d1x", "d1y", "d1z", "d2x", "d2y", "d2z")
 # Vertex properties of an annotated PLY, besides geometry and colour, in file order.
-ANNOTATED_FIELDS = (shape.FIELDS + ("valid", "d1x", "d1y", "d1z", "d2x", "d2y", "d2z",
-                                    "n_neighbors", "n_samples", "residual", "quality"))
+ANNOTATED_FIELDS = CURVATURE_FIELDS + ("n_neighbors", "n_samples", "residual", "quality")
 _GEOMETRY = ("x", "y", "z", "nx", "ny", "nz")
 _COLOR = ("red", "green", "blue", "alpha")
 
@@ -365,6 +367,19 @@ def write_ply(path, vertices, faces=None, fields=None):
     atomic_write(path, ply.write)
 
 
+def curvature_fields(result):
+    """The :data:`CURVATURE_FIELDS` of a :class:`~meshcurv.CurvatureResult`, in that order, as
+    ``{name: (n,) array}``: float64, ``valid`` uint8 (1 = estimated), ``d1x .. d2z`` the
+    components of the principal directions."""
+    out = {f: np.asarray(getattr(result, f), dtype=np.float64) for f in shape.FIELDS}
+    out["valid"] = np.asarray(result.valid, dtype=np.uint8)
+    for name in ("d1", "d2"):
+        arr = getattr(result, name)
+        for a, c in enumerate("xyz"):
+            out[name + c] = arr[:, a]
+    return out
+
+
 def write_annotated(path, data, result, quality="mean", colormap="Turbo", clamp=2.0):
     """Write ``data`` with the curvature ``result`` as an annotated binary PLY (atomic).
 
@@ -390,17 +405,12 @@ def write_annotated(path, data, result, quality="mean", colormap="Turbo", clamp=
         raise ValueError(f"result has {len(result.k1)} rows for {n} vertices")
     if quality not in shape.FIELDS:
         raise ValueError(f"quality must be one of {', '.join(shape.FIELDS)}, got {quality!r}")
-    values = {f: getattr(result, f) for f in shape.FIELDS}
+    values = curvature_fields(result)
     ours = set(_GEOMETRY) | set(_COLOR) | set(ANNOTATED_FIELDS)
     fields = {k: v for k, v in data.fields.items() if k not in ours}
     fields.update({"nx": result.normals[:, 0], "ny": result.normals[:, 1],
                    "nz": result.normals[:, 2]})
     fields.update(values)
-    fields["valid"] = result.valid.astype(np.uint8)
-    for i, c in enumerate("xyz"):
-        fields["d1" + c] = result.d1[:, i]
-    for i, c in enumerate("xyz"):
-        fields["d2" + c] = result.d2[:, i]
     fields["n_neighbors"] = np.asarray(result.n_neighbors, dtype=np.int32)
     fields["n_samples"] = np.asarray(result.n_samples, dtype=np.int32)
     fields["residual"] = np.asarray(result.residual, dtype=np.float64)

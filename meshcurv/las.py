@@ -33,14 +33,13 @@ import os
 
 import numpy as np
 
-from .io import atomic_write, check_distinct
+from .io import CURVATURE_FIELDS, atomic_write, check_distinct, curvature_fields
 
 __all__ = ["LasReadError", "CURVATURE_FIELDS", "NORMAL_FIELDS", "las_point_count",
            "iter_las_chunks", "read_las_points", "result_fields", "annotate_las",
            "write_las_curvature"]
 
-CURVATURE_FIELDS = ("k1", "k2", "mean", "gaussian", "shape_index", "curvedness", "valid",
-                    "d1x", "d1y", "d1z", "d2x", "d2y", "d2z")
+
 NORMAL_FIELDS = ("NormalX", "NormalY", "NormalZ")
 _DESCRIPTIONS = {
     "k1": "max principal curvature", "k2": "min principal curvature",
@@ -168,14 +167,7 @@ def result_fields(result, normals=False, float_type="f8"):
     ``normals=True`` adds NormalX, NormalY, NormalZ (write them when they were estimated).
     """
     ft = np.dtype(float_type)
-    out = {
-        "k1": result.k1, "k2": result.k2, "mean": result.mean, "gaussian": result.gaussian,
-        "shape_index": result.shape_index, "curvedness": result.curvedness,
-        "valid": np.asarray(result.valid, dtype=np.uint8),
-    }
-    for name, arr in (("d1", result.d1), ("d2", result.d2)):
-        for a, c in enumerate("xyz"):
-            out[f"{name}{c}"] = arr[:, a]
+    out = curvature_fields(result)
     if normals:
         for a, name in enumerate(NORMAL_FIELDS):
             out[name] = result.normals[:, a]

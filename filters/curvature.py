@@ -11,7 +11,7 @@ import numpy as np
 import pymeshlab
 
 from meshcurv import principal_curvatures, shape
-from meshcurv.io import bbox_diagonal
+from meshcurv.io import bbox_diagonal, usable_normals
 
 __all__ = ["compute_curvature_cga_per_vertex", "resolve_radius"]
 
@@ -102,11 +102,6 @@ def _store_point(ms, name, values):
                                                      y_expr=carriers[1], z_expr=carriers[2])
 
 
-def _usable_normals(n):
-    return (n is not None and len(n) and np.isfinite(n).all()
-            and bool((np.linalg.norm(n, axis=1) > 1e-12).all()))
-
-
 def compute_curvature_cga_per_vertex(self, radius=None, ndirections=8, neighborhood="auto",
                                      quality="mean", colormap="Turbo", clamp=2.0,
                                      normals="auto", slab=0.25):
@@ -153,10 +148,11 @@ def compute_curvature_cga_per_vertex(self, radius=None, ndirections=8, neighborh
         Percent of values clipped at each end of the colour ramp (ignored for shape_index).
     normals : str = 'auto'
         'auto': for point clouds the mesh's own vertex normals when all are non-zero (loaded
-        from file or computed by a MeshLab filter), else estimated; for triangle meshes the
-        estimator's area-weighted face normals (what MeshLab computes on load, recomputed).
-        'mesh': always the mesh's vertex normals. 'estimate': always estimated (face normals,
-        or PCA over the same ball plus an MST orientation for point clouds).
+        from file or computed by a MeshLab filter), else estimated; for triangle meshes
+        estimated as :func:`meshcurv.principal_curvatures` does by default (PCA over the
+        neighbourhood, oriented by the faces, refined by a local quadric where the data are
+        clean). 'mesh': always the mesh's vertex normals. 'estimate': always estimated (as
+        above for meshes; PCA over the same ball plus an MST orientation for point clouds).
     slab : float = 0.25
         Half-width of each section plane's slab, as a fraction of the radius.
 
@@ -194,11 +190,11 @@ def compute_curvature_cga_per_vertex(self, radius=None, ndirections=8, neighborh
     mesh_normals = mesh.vertex_normal_matrix()
     given = None
     if normals == "mesh":
-        if not _usable_normals(mesh_normals):
+        if not usable_normals(mesh_normals):
             raise ValueError("normals='mesh' but the current mesh has zero or non-finite "
                              "vertex normals")
         given = mesh_normals
-    elif normals == "auto" and point_cloud and _usable_normals(mesh_normals):
+    elif normals == "auto" and point_cloud and usable_normals(mesh_normals):
         given = mesh_normals
 
     with warnings.catch_warnings():

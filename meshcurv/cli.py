@@ -40,12 +40,6 @@ _RADIUS_HELP = ("neighbourhood radius: a number in model units (0.05) or a perce
                 "bounding-box diagonal (2%%); default: the radius whose ball holds ~100 points")
 
 
-def _one_line(exc):
-    """The first line of an exception's message (its type name when it has none)."""
-    text = str(exc).strip()
-    return text.splitlines()[0] if text else type(exc).__name__
-
-
 class CommandError(Exception):
     """An expected error with a one-line message and an exit code."""
 
@@ -123,8 +117,7 @@ def _normals_for(data, mode):
     if mode == "estimate":
         return None
     n = data.normals
-    usable = (n is not None and np.isfinite(n).all()
-              and (np.linalg.norm(n, axis=1) > 1e-12).all())
+    usable = io.usable_normals(n)
     if mode == "file":
         if not usable:
             raise io.MeshFileError(f"{data.path}: --normals file, but the file has no usable "
@@ -260,12 +253,11 @@ def _run_one(input_path, output_path, options):
         summary = annotate_file(input_path, output_path, options)
         summary["status"] = "ok"
         return summary
-    except (io.MeshFileError, ValueError, OSError) as exc:
-        message = str(exc)
+    except (ValueError, OSError) as exc:       # io.MeshFileError is a ValueError
+        message = io.first_line(exc)
     except Exception as exc:  # a bug, but one bad file must not stop a batch
-        message = f"{type(exc).__name__}: {exc}"
-    return {"input": input_path, "output": output_path, "status": "failed",
-            "error": message.splitlines()[0] if message else "failed"}
+        message = f"{type(exc).__name__}: {io.first_line(exc)}"
+    return {"input": input_path, "output": output_path, "status": "failed", "error": message}
 
 
 def _init_worker(threads):
@@ -312,7 +304,7 @@ def dask_client(scheduler, timeout="20s"):
         client = Client(scheduler, timeout=timeout)
     except (OSError, TimeoutError, ValueError) as exc:
         raise CommandError(f"cannot connect to the Dask scheduler {scheduler}: "
-                           f"{_one_line(exc)}") from None
+                           f"{io.first_line(exc)}") from None
     try:
         yield client
     finally:
@@ -384,7 +376,7 @@ def _batch_serial(inputs, outputs, options, todo, record, jobs=1):
 
 def _worker_failure(k, inputs, outputs, exc):
     return {"input": inputs[k], "output": outputs[k], "status": "failed",
-            "error": f"worker failed: {type(exc).__name__}: {_one_line(exc)}"}
+            "error": f"worker failed: {type(exc).__name__}: {io.first_line(exc)}"}
 
 
 def _batch_pool(inputs, outputs, options, todo, record, jobs=2):
@@ -542,7 +534,9 @@ def build_parser():
                    help="annotated output: .ply, or .las/.laz for a .las/.laz input")
     p.add_argument("--preview", metavar="PNG", default=None,
                    help="also render a PNG coloured by shape index (needs matplotlib)")
-    p.add_argument("--progress", action="store_true", help="show a per-point progress bar")
+    p.add_argument("--progress", action="store_true",
+                   help="show progress bars (a tiled run shows them whenever stderr is a "
+                   "terminal)")
     g = p.add_argument_group(
         "large LAS/LAZ clouds (tiled on Dask; input and output .las or .laz)")
     g.add_argument("--tile-size", type=_positive_float, default=None, metavar="S",
@@ -631,12 +625,11 @@ def _cmd_annotate_tiled(args, options):
                                     orientation=("mst" if options.viewpoint is None
                                                  else options.viewpoint))
         except TileError as exc:
-            raise CommandError(f"{_one_line(exc)} (finished tiles are kept "
+            raise CommandError(f"{io.first_line(exc)} (finished tiles are kept "
                                f"in {args.output}.meshcurv-work; re-run to resume)") from None
-    print(f"{args.output}: {getattr(report, 'n_points', '?')} points in "
-          f"{getattr(report, 'n_tiles', '?')} tiles of side {args.tile_size or 'auto'} "
-          f"(model units), radius {getattr(report, 'radius', radius)} (model units), "
-          f"{getattr(report, 'seconds', 0.0):.1f} s")
+    print(f"{args.output}: {report.n_points} points in {report.n_tiles} tiles of side "
+          f"{report.tile_size:.6g} (model units), radius {report.radius:.6g} (model units), "
+          f"{report.seconds:.1f} s")
     return 0
 
 
@@ -715,7 +708,7 @@ def main(argv=None):
         print(f"meshcurv: error: {exc}", file=sys.stderr)
         return exc.code
     except (io.MeshFileError, ValueError, OSError) as exc:
-        print(f"meshcurv: error: {_one_line(exc)}", file=sys.stderr)
+        print(f"meshcurv: error: {io.first_line(exc)}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("meshcurv: interrupted", file=sys.stderr)

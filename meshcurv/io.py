@@ -45,6 +45,19 @@ class MeshFileError(ValueError):
     """A file that cannot be read or written; the message starts with the file name."""
 
 
+def usable_normals(normals):
+    """Whether ``normals`` ((n, 3) or None) is a full set of finite, non-zero normals, fit to
+    hand to the estimator as given normals (e.g. from a file or a MeshLab mesh)."""
+    return bool(normals is not None and np.isfinite(normals).all()
+                and (np.linalg.norm(normals, axis=1) > 1e-12).all())
+
+
+def first_line(exc):
+    """The first line of an exception's message (its type name when it has none)."""
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
 @dataclass
 class MeshData:
     """Geometry of a mesh or point cloud as read from a file; one row per vertex, file order.
@@ -216,7 +229,7 @@ def read_las(path):
     try:
         xyz, normals = las.read_las_points(path)
     except las.LasReadError as exc:  # its message already names the file
-        raise MeshFileError(str(exc).splitlines()[0]) from exc
+        raise MeshFileError(first_line(exc)) from exc
     return MeshData(vertices=xyz, normals=normals, path=path)
 
 
@@ -274,8 +287,8 @@ def read(path):
     except OSError as exc:
         raise MeshFileError(f"{path}: cannot read file ({exc})") from exc
     except Exception as exc:  # parsers raise anything on corrupt input
-        msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise MeshFileError(f"{path}: not a valid {ext[1:].upper()} file ({msg})") from exc
+        raise MeshFileError(f"{path}: not a valid {ext[1:].upper()} file "
+                            f"({first_line(exc)})") from exc
     data.path = path
     if len(data.vertices) == 0:
         raise MeshFileError(f"{path}: the file holds no vertices")
@@ -438,7 +451,7 @@ def write_las(path, data, result, quality=None, colormap=None, clamp=None):
     try:
         las.write_las_curvature(data.path, path, result)
     except las.LasReadError as exc:
-        raise MeshFileError(str(exc).splitlines()[0]) from exc
+        raise MeshFileError(first_line(exc)) from exc
 
 
 WRITERS = {".ply": write_annotated, ".las": write_las, ".laz": write_las}

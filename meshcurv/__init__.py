@@ -8,9 +8,27 @@ Sign convention: outward normal, convex positive, k1 >= k2; radius in model unit
 >>> res.k1, res.k2, res.d1, res.d2, res.shape_index, res.valid  # doctest: +SKIP
 """
 
-from . import surfaces  # noqa: F401  (meshcurv.surfaces without a separate import)
-from .estimator import CurvatureResult, estimate_normals, principal_curvatures
-from .neighborhoods import default_radius
+import importlib
 
 __all__ = ["CurvatureResult", "principal_curvatures", "estimate_normals", "default_radius"]
 __version__ = "0.1.0"
+
+# The names above and the submodule ``surfaces`` load on first use (PEP 562), so that
+# ``meshcurv --help`` and ``meshcurv info`` do not import numba, scipy and trimesh.
+_LAZY = {"CurvatureResult": "estimator", "principal_curvatures": "estimator",
+         "estimate_normals": "estimator", "default_radius": "neighborhoods",
+         "surfaces": None}
+
+
+def __getattr__(name):
+    if name not in _LAZY:
+        raise AttributeError(f"module 'meshcurv' has no attribute {name!r}")
+    module = _LAZY[name]
+    value = (importlib.import_module(f".{name}", __name__) if module is None
+             else getattr(importlib.import_module(f".{module}", __name__), name))
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))

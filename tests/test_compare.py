@@ -38,8 +38,12 @@ def test_smallest_comparison_has_one_row_per_method_and_noise_level(smallest):
         (m, n) for m in SMALLEST_METHODS for n in (0.0, 0.003))
     for r in rows:
         assert r["surface"] == "sphere" and r["sampling"] == "regular"
-        # a MeshLab crash is a recorded result, never a missing row
-        assert r["status"] == "ok" or r["status"].startswith(("crash", "timeout", "error"))
+        # APSS aborts on this icosphere: its crash is a recorded row, never a missing one;
+        # every other method runs
+        if r["method"] == "APSS":
+            assert r["status"] == "ok" or r["status"].startswith(("crash", "timeout", "error"))
+        else:
+            assert r["status"] == "ok", (r["method"], r["status"])
     for method in SMALLEST_METHODS:
         assert f"| sphere (regular) | 0.3 % | {method} |" in report
         assert f"| sphere (regular) | 0.0 % | {method} |" in report

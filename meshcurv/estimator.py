@@ -30,7 +30,8 @@ def _mix_normals(start, refined, beta):
     """``start + beta (refined - start)``, normalised, row by row.
 
     With beta from the measured noise: the quadric's normal on clean data (no tilt from
-    irregular sampling), the plane fit's under noise (it averages the most points).
+    irregular sampling), the starting one (usually the plane fit's, which averages the most
+    points) under noise.
     """
     mixed = start + beta[:, None] * (refined - start)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -188,7 +189,9 @@ def _mst_normals(v, radius, neighbours, kernel_points, rank, progress):
     n = len(v)
     nv = np.full((n, 3), np.nan)
     graph = np.full((n, _TREE_NEIGHBOURS), -1, dtype=np.int32)
-    for pos in _blocks(spatial_order(v, radius), progress, "normals"):
+    # the grid's own cell order (``rank``) when there is one, else one made for the purpose
+    order = rank if rank is not None else spatial_order(v, radius)
+    for pos in _blocks(order, progress, "normals"):
         indptr, indices = neighbours(pos)
         nv[pos] = nrm.pca_normals(kernel_points, v[pos], indptr, indices, radius)
         near = kernels.nearest_in_lists(kernel_points, v[pos], indptr, indices, _TREE_NEIGHBOURS)
@@ -310,14 +313,15 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
     refine_normals : bool or None, default None
         Refine the normals by a local quadric fit over the same neighbourhood before the
         circle fits (:func:`meshcurv.kernels.local_jet`), mixed with the starting normal by
-        the measured noise as the weights are (:func:`weight_blend`): face and PCA normals
+        the measured noise (the mix of ``weighting="auto"``, :func:`weight_blend`, whatever
+        ``weighting`` is): face and PCA normals
         tilt with irregular sampling (0.7 degrees on a random sphere, up to 3 % in
         curvature), the quadric's normal does not but is noisier. None: refine estimated
         normals, use given ones as they are; True: refine given normals too; False: never.
     orientation : "mst" or (3,) array-like
         Global orientation of estimated point-cloud normals: "mst" propagates along a minimum
-        spanning tree and then points away from the centroid; a (3,) point orients every
-        normal towards it (a scanner position).
+        spanning tree and then turns each connected piece away from its own centroid; a (3,)
+        point orients every normal towards it (a scanner position).
     query : (q,) int, optional
         Estimate only at these vertex indices (neighbours still come from all vertices); the
         result then has q rows in this order.
@@ -327,8 +331,9 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
     Returns
     -------
     CurvatureResult
-        ``k1, k2, d1, d2, normals, valid, mean, gaussian, shape_index, curvedness`` and the
-        diagnostics ``n_neighbors, n_samples, residual``; one row per vertex (or query).
+        ``k1, k2, d1, d2, normals, valid, mean, gaussian, shape_index, curvedness``, the
+        diagnostics ``n_neighbors, n_samples, residual, noise`` (one row per vertex, or per
+        query) and the ``radius`` used.
 
     Raises
     ------
@@ -378,12 +383,11 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
         radius = auto_radius(v, f, normals=given_normals, weighting=weighting, slab=slab,
                              n_directions=n_directions, neighborhood=neighborhood)
     radius = float(radius)
-    if not (np.isfinite(radius) and radius > 0) and n > 1:
-        if np.isfinite(v).all(axis=1).sum() > 1:
-            raise ValueError(f"radius must be a positive number of model units, got {radius}")
+    finite = np.flatnonzero(np.isfinite(v).all(axis=1))
+    if len(finite) > 1 and not (np.isfinite(radius) and radius > 0):
+        raise ValueError(f"radius must be a positive number of model units, got {radius}")
 
     # 1. neighbourhoods: connected k-ring limited to the ball, or a ball query
-    finite = np.flatnonzero(np.isfinite(v).all(axis=1))
     if use_kring:
         adjacency = edge_adjacency(f, n)
         work = KringWork(n)
@@ -394,14 +398,6 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
     else:
         neighbours, kernel_points, rank = _ball_search(v, finite, radius)
 
-    def visiting_order(idx):
-        """Order of the positions in ``idx`` to process: by grid cell for ball queries (the
-        points a block touches then stay in cache); as given for k-rings, whose memory
-        accesses follow the mesh's own numbering."""
-        if use_kring:
-            return len(idx)
-        return spatial_order(v[idx], radius)
-
     # 2. normals: given, from the faces, or a PCA plane fit over each block's neighbourhood
     # (oriented by the faces or towards the viewpoint block by block; along a spanning tree in
     # a first pass of its own, as the tree needs every normal)
@@ -410,9 +406,10 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
         method = "pca"
     if method == "faces" and given_normals is None and f is None:
         raise ValueError("normal_estimation='faces' needs faces")
-    estimate = given_normals is None and method == "pca"
     viewpoint = None if isinstance(orientation, str) else orientation
-    tree_orient = estimate and f is None and viewpoint is None
+    tree_orient = given_normals is None and method == "pca" and f is None and viewpoint is None
+    # PCA normals block by block, where the orientation needs no other block
+    estimate = given_normals is None and method == "pca" and not tree_orient
     face_normals = None
     if given_normals is not None:
         nv = given_normals
@@ -422,18 +419,8 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
         nv = face_normals
     refine = given_normals is None if refine_normals is None else bool(refine_normals)
 
-    def estimated_normals(idx, indptr, indices):
-        """PCA normals of a block, oriented where that needs no other block."""
-        nb = nrm.pca_normals(kernel_points, v[idx], indptr, indices, radius)
-        if face_normals is not None:
-            nrm.orient_like(nb, face_normals[idx])
-        elif viewpoint is not None:
-            nrm.orient_towards(nb, v[idx], viewpoint)
-        return nb
-
     if tree_orient:
         nv = _mst_normals(v, radius, neighbours, kernel_points, rank, progress)
-        estimate = False
 
     # 3-5. directional circle fits and the Euler fit, in the compiled kernel, block by block
     # in a spatially coherent order of the queries
@@ -451,25 +438,33 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
     b_k1, b_k2, b_res, b_noise = (np.empty(size) for _ in range(4))
     b_d1, b_d2 = np.empty((size, 3)), np.empty((size, 3))
     b_samples, b_neighbours = np.empty(size), np.empty(size)
-    for pos in _blocks(visiting_order(query), progress, "curvature"):
+    # queries by grid cell for ball queries (the points a block touches then stay in cache);
+    # as given for k-rings, whose memory accesses follow the mesh's own numbering
+    order = len(query) if use_kring else spatial_order(v[query], radius)
+    for pos in _blocks(order, progress, "curvature"):
         idx = query[pos]
+        xb = v[idx]
         b = len(idx)
         indptr, indices = neighbours(idx)
         if estimate:
-            qb = estimated_normals(idx, indptr, indices)
+            qb = nrm.pca_normals(kernel_points, xb, indptr, indices, radius)
+            if face_normals is not None:
+                nrm.orient_like(qb, face_normals[idx])
+            else:
+                nrm.orient_towards(qb, xb, viewpoint)
         else:
             qb = nv[idx]
         with np.errstate(invalid="ignore", divide="ignore"):
             qb = qb / np.linalg.norm(qb, axis=1, keepdims=True)
         start = qb.copy() if refine else None
-        kernels.local_jet(kernel_points, v[idx], qb, indptr, indices, radius, refine,
-                          b_noise[:b])
+        kernels.local_jet(kernel_points, xb, qb, indptr, indices, radius, refine, b_noise[:b])
+        beta = weight_blend(b_noise[:b], radius, "auto")
         if refine:
-            qb = _mix_normals(start, qb, weight_blend(b_noise[:b], radius, "auto"))
+            qb = _mix_normals(start, qb, beta)
         kernels.curvature_cga(
-            kernel_points, v[idx], qb, indptr, indices, radius, int(n_directions),
+            kernel_points, xb, qb, indptr, indices, radius, int(n_directions),
             float(slab), float(min_points), float(min_spread),
-            weight_blend(b_noise[:b], radius, weighting),
+            beta if weighting == "auto" else weight_blend(b_noise[:b], radius, weighting),
             circle_normalization == "unit", bool(section_blend), bool(half_frequency), bool(robust),
             b_k1[:b], b_k2[:b], b_d1[:b], b_d2[:b], b_samples[:b], b_res[:b], b_neighbours[:b],
             rank)

@@ -26,10 +26,11 @@ mean (|dk1| + |dk2|) / 2 = C sigma / (sqrt(rho) R^3) with C = 5.2 .. 5.7 for
 ``weighting="none"`` and C = 13.7 .. 17 for ``weighting="distance"`` (weights (1 - r^2/R^2)^4
 leave fewer effective points, so the same radius averages less noise away).
 
-Usage from the estimator (``radius="auto"``)::
+Usage from the estimator (``radius="auto"``), with every option of that call except
+``min_points`` (here: the smallest ball)::
 
     radius = auto_radius(vertices, faces, normals=normals, weighting=weighting, slab=slab,
-                         n_directions=n_directions, normal_estimation=normal_estimation)
+                         n_directions=n_directions, orientation=orientation, ...)
 """
 
 import numpy as np

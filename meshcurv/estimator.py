@@ -380,8 +380,14 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
             raise ValueError(f"radius must be a number of model units, None or 'auto', got {radius!r}")
         from .autoradius import auto_radius     # it calls this function for its pilot runs
 
+        # pilot runs with this call's own options (a viewpoint, too: no spanning tree then)
         radius = auto_radius(v, f, normals=given_normals, weighting=weighting, slab=slab,
-                             n_directions=n_directions, neighborhood=neighborhood)
+                             n_directions=n_directions, neighborhood=neighborhood,
+                             normal_estimation=normal_estimation, refine_normals=refine_normals,
+                             orientation=orientation, min_spread=min_spread,
+                             circle_normalization=circle_normalization,
+                             section_blend=section_blend, robust=robust,
+                             half_frequency=half_frequency)
     radius = float(radius)
     finite = np.flatnonzero(np.isfinite(v).all(axis=1))
     if len(finite) > 1 and not (np.isfinite(radius) and radius > 0):

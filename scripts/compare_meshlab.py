@@ -61,7 +61,6 @@ MESHLAB_METHODS = {
     "SDQF": "Scale Dependent Quadric Fitting",
     "APSS": None,
 }
-ALL_METHODS = ["meshcurv"] + list(MESHLAB_METHODS)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -159,32 +158,11 @@ def run_meshlab(method, vertices, faces, radius, normals=None, timeout=300.0, re
 # meshcurv
 # ---------------------------------------------------------------------------------------------
 
-# meshcurv variants compared. "meshcurv" uses the library's defaults (RECOMMENDED holds what
-# differs from them: nothing); "meshcurv (equal weights)" the same with weighting="none", the
-# choice for noisy data when the weights are not picked from the measured noise;
-# "meshcurv (auto R)" the defaults with the radius from meshcurv.autoradius.
-RECOMMENDED = {}
+# meshcurv variants compared. "meshcurv" uses the library's defaults; "meshcurv (equal
+# weights)" the same with weighting="none", the choice for noisy data when the weights are not
+# picked from the measured noise; "meshcurv (auto R)" the defaults with the radius from
+# meshcurv.autoradius.
 EQUAL_WEIGHTS = dict(weighting="none")
-
-
-def supported_settings(settings):
-    """Keep only the keyword options the installed estimator accepts.
-
-    The estimator's options are still being tuned; ``weighting="none"`` maps to the older
-    ``distance_weights=False`` so the comparison runs against either version.
-    """
-    import inspect
-
-    import meshcurv
-
-    params = inspect.signature(meshcurv.principal_curvatures).parameters
-    out = {}
-    for key, value in settings.items():
-        if key == "weighting" and key not in params and "distance_weights" in params:
-            out["distance_weights"] = value == "distance"
-        elif key in params:
-            out[key] = value
-    return out
 
 
 def current_defaults():
@@ -203,8 +181,7 @@ def run_meshcurv(vertices, faces, radius, **settings):
     import meshcurv
 
     t0 = time.perf_counter()
-    res = meshcurv.principal_curvatures(vertices, faces, radius=radius,
-                                        **supported_settings(settings))
+    res = meshcurv.principal_curvatures(vertices, faces, radius=radius, **settings)
     return dict(k1=res.k1, k2=res.k2, seconds=time.perf_counter() - t0, status="ok")
 
 
@@ -298,13 +275,13 @@ def run_case(case, methods, timeout):
     for method in methods:
         radius = case.radius
         if method == "meshcurv":
-            r = run_meshcurv(m.vertices, m.faces, radius, **RECOMMENDED)
+            r = run_meshcurv(m.vertices, m.faces, radius)
         elif method == "meshcurv (equal weights)":
             r = run_meshcurv(m.vertices, m.faces, radius, **EQUAL_WEIGHTS)
         elif method == "meshcurv (auto R)":
             t0 = time.perf_counter()
-            radius = auto_radius(m.vertices, m.faces, **supported_settings(RECOMMENDED))
-            r = run_meshcurv(m.vertices, m.faces, radius, **RECOMMENDED)
+            radius = auto_radius(m.vertices, m.faces)
+            r = run_meshcurv(m.vertices, m.faces, radius)
             r["seconds"] = time.perf_counter() - t0
         else:
             r = run_meshlab(method, m.vertices, m.faces, radius, timeout=timeout)
@@ -355,12 +332,9 @@ def settings_study(cases, names=None):
         mask = m.border_distance >= case.radius
         for name in names or list(SETTINGS_STUDY):
             settings = SETTINGS_STUDY[name]
-            try:
-                res = meshcurv.principal_curvatures(m.vertices, m.faces, radius=case.radius,
-                                                    **supported_settings(settings))
-                error = mean_error(res.k1, res.k2, m, mask)
-            except ValueError:      # an option value this version of the estimator lacks
-                error = np.nan
+            res = meshcurv.principal_curvatures(m.vertices, m.faces, radius=case.radius,
+                                                **settings)
+            error = mean_error(res.k1, res.k2, m, mask)
             rows.append(dict(surface=case.surface, sampling=case.sampling, noise=case.noise,
                              setting=name, error=error))
     return rows
@@ -378,12 +352,10 @@ def radius_study(cases):
         row = dict(surface=case.surface, sampling=case.sampling, noise=case.noise,
                    radius=case.radius)
         for factor in RADIUS_FACTORS:
-            res = meshcurv.principal_curvatures(m.vertices, m.faces, radius=factor * case.radius,
-                                                **supported_settings(RECOMMENDED))
+            res = meshcurv.principal_curvatures(m.vertices, m.faces, radius=factor * case.radius)
             row[factor] = mean_error(res.k1, res.k2, m, mask)
-        auto = auto_radius(m.vertices, m.faces, **supported_settings(RECOMMENDED))
-        res = meshcurv.principal_curvatures(m.vertices, m.faces, radius=auto,
-                                            **supported_settings(RECOMMENDED))
+        auto = auto_radius(m.vertices, m.faces)
+        res = meshcurv.principal_curvatures(m.vertices, m.faces, radius=auto)
         row["auto"], row["auto_radius"] = mean_error(res.k1, res.k2, m, mask), auto
         rows.append(row)
     return rows
@@ -439,8 +411,10 @@ def agreement(fields, used, reference="meshcurv"):
     """
     from scipy.stats import spearmanr
 
+    from meshcurv.shape import curvedness
+
     k1r, k2r = fields[reference]
-    c = np.nanmedian(np.sqrt(0.5 * (k1r ** 2 + k2r ** 2))[used])
+    c = np.nanmedian(curvedness(k1r, k2r)[used])
     rows = []
     for method, (k1, k2) in fields.items():
         if method == reference:
@@ -473,11 +447,11 @@ def run_real(name, path, timeout):
         name = f"{name}, cropped to the {len(v)} of {n_original} vertices nearest its centre"
     used = np.zeros(len(v), dtype=bool)
     used[f.ravel()] = True
-    radius = auto_radius(v, f, **supported_settings(RECOMMENDED))
+    radius = auto_radius(v, f)
     fields, times, status = {}, {}, {}
     for method in ["meshcurv", "Taubin", "QF", "SDQF", "APSS"]:
         if method == "meshcurv":
-            r = run_meshcurv(v, f, radius, **RECOMMENDED)
+            r = run_meshcurv(v, f, radius)
         elif method == "APSS":
             # APSS gets the referenced points only (unreferenced ones have no normal)
             r = run_meshlab(method, v[used], _reindex(f, used), radius, timeout=timeout)

@@ -3,8 +3,8 @@
 - **Table 2**: the paraboloid z = 0.2 x^2 + 0.1 y^2 on [-10, 10]^2, radius 2, 8 directions,
   regular and random sampling, |dk1| and |dk2| statistics next to the paper's numbers.
 - **Figs. 8 and 9**: the circle fit alone on 12 (4, 24) points of circular arcs seen through a
-  fixed window of width 4, radii 1 .. 10000, Gaussian noise sigma = 0.5, regular and random
-  spacing along the arc.
+  fixed window of width 4, radii 1 .. 10000, Gaussian noise sigma = 0, 0.05 and 0.5 (Fig. 9:
+  0.5), regular and random spacing along the arc.
 - **Fig. 10**: RMS error of the sine (Euler model) fit for 4 .. 100 samples and several noise
   levels.
 
@@ -225,7 +225,7 @@ def _circle_fit_figure(path, suptitle, panel, radii, trials, runs):
 
 
 def figure8(path, trials, radii):
-    """Fig. 8: 12 points, regular vs random spacing, without and with noise (sigma 0.5)."""
+    """Fig. 8: 12 points, regular vs random spacing, noise sigma 0, 0.05 and 0.5."""
     runs = [((spacing, sigma), f"{spacing}, sigma {sigma}", color,
              dict(n=12, spacing=spacing, sigma=sigma))
             for spacing, sigma, color in (("regular", 0.0, "C0"), ("random", 0.0, "C1"),
@@ -342,8 +342,9 @@ def write_report(path, mode, table2, fig8, fig9, fig10, radii, counts, sigmas, t
         "",
         "The paper lists 13926 points for a regular grid with Δx = 0.11 on [-10, 10]²; those "
         "two numbers disagree (a 0.11 grid has 183² = 33489 points, 13926 is about a 118 x 118 "
-        "grid), so "
-        "both grids are run where time allows. Normals from the faces. Settings: **paper** = "
+        "grid), so both grids are run where time allows. Normals estimated by meshcurv (PCA "
+        "over the k-ring, oriented by the faces, refined by a local quadric fit), not the "
+        "exact ones. Settings: **paper** = "
         "the algorithm as published (|t| = 1 circle fits, nominal plane angles in the sine fit, "
         "no outlier rejection, equal weights, slab 0.25 R); **meshcurv defaults** = the "
         "library's current defaults; **weighting none** = defaults with equal weights.",

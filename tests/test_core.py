@@ -126,7 +126,7 @@ def test_auto_weighting_follows_the_noise():
 
 @pytest.mark.parametrize("sampling", ["regular", "random"])
 def test_table2_paraboloid(sampling):
-    """z = 0.2x^2 + 0.1y^2, radius 2, 8 directions, normals from the faces (not the exact ones).
+    """z = 0.2x^2 + 0.1y^2, radius 2, 8 directions, normals estimated by meshcurv (not exact).
 
     The paper reports mean |dk1| 0.008 / |dk2| 0.019 (max 0.028 / 0.085); we require <= 0.002
     mean and <= 0.03 max (measured: 0.0015 / 0.0006 regular, 0.0016 / 0.0007 random).

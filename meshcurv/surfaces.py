@@ -12,7 +12,7 @@ import numpy as np
 from scipy.spatial import Delaunay
 
 __all__ = ["Surface", "paraboloid", "monkey_saddle", "sphere", "cylinder", "torus",
-           "add_normal_noise"]
+           "add_normal_noise", "orient_faces"]
 
 
 @dataclass
@@ -43,8 +43,9 @@ def _unit(v):
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
-def _orient_faces(vertices, faces, normals):
-    """Flip triangles whose winding disagrees with the exact normals at their corners."""
+def orient_faces(vertices, faces, normals):
+    """Faces (m, 3) with every triangle wound counter-clockwise seen from the side ``normals``
+    ((n, 3), e.g. the exact ones) point to: triangles that disagree are flipped (a copy)."""
     fn = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]],
                   vertices[faces[:, 2]] - vertices[faces[:, 0]])
     flip = np.einsum("ij,ij->i", fn, normals[faces].sum(axis=1)) < 0
@@ -102,7 +103,7 @@ def _monge(name, x, y, f, fx, fy, fxx, fxy, fyy, normal_sign, faces, border):
     d1 = direction(k1)
     d2 = np.cross(normals, d1)
     vertices = np.column_stack([x, y, f])
-    faces = _orient_faces(vertices, faces, normals)
+    faces = orient_faces(vertices, faces, normals)
     return Surface(name, vertices, faces, normals, k1, k2, d1, d2, border)
 
 
@@ -169,7 +170,7 @@ def sphere(radius=1.0, subdivisions=5, sampling="regular", n=10000, seed=0):
     v = radius * unit
     k = np.full(len(v), 1.0 / radius)
     nan3 = np.full((len(v), 3), np.nan)
-    return Surface("sphere", v, _orient_faces(v, faces, unit), unit, k, k.copy(), nan3,
+    return Surface("sphere", v, orient_faces(v, faces, unit), unit, k, k.copy(), nan3,
                    nan3.copy(), np.full(len(v), np.inf))
 
 
@@ -184,7 +185,7 @@ def cylinder(radius=1.0, height=4.0, n_around=200, n_along=None):
     v = np.column_stack([radius * normals[:, :2], zz])
     d1 = np.column_stack([-np.sin(uu), np.cos(uu), np.zeros_like(uu)])
     d2 = np.cross(normals, d1)
-    faces = _orient_faces(v, _grid_faces(n_around, n_along, wrap_u=True), normals)
+    faces = orient_faces(v, _grid_faces(n_around, n_along, wrap_u=True), normals)
     return Surface("cylinder", v, faces, normals, np.full(len(v), 1.0 / radius),
                    np.zeros(len(v)), d1, d2, height / 2 - np.abs(zz))
 
@@ -202,7 +203,7 @@ def torus(major=2.0, minor=0.5, n_major=240, n_minor=60):
     v = np.column_stack([ring * np.cos(uu), ring * np.sin(uu), minor * np.sin(ww)])
     d1 = np.column_stack([-np.sin(ww) * np.cos(uu), -np.sin(ww) * np.sin(uu), np.cos(ww)])
     d2 = np.cross(normals, d1)
-    faces = _orient_faces(v, _grid_faces(n_major, n_minor, wrap_u=True, wrap_v=True), normals)
+    faces = orient_faces(v, _grid_faces(n_major, n_minor, wrap_u=True, wrap_v=True), normals)
     return Surface("torus", v, faces, normals, np.full(len(v), 1.0 / minor),
                    np.cos(ww) / ring, d1, d2, np.full(len(v), np.inf))
 

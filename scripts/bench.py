@@ -47,8 +47,11 @@ import numpy as np
 # with it every block above 64 KiB is mapped and unmapped, so peak RSS measures each call alone.
 _MMAP_ENV = "MALLOC_MMAP_THRESHOLD_"
 
-TAUBIN, QF, SDQF = "Taubin approximation", "Quadric Fitting", "Scale Dependent Quadric Fitting"
-MESHLAB_METHODS = {"MeshLab Taubin": TAUBIN, "MeshLab QF": QF, "MeshLab SDQF": SDQF}
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import compare_meshlab  # noqa: E402  (the MeshLab conventions of the comparison, shared)
+
+# "MeshLab Taubin", "MeshLab QF", "MeshLab SDQF" -> pymeshlab's method names
+MESHLAB_METHODS = {f"MeshLab {k}": v for k, v in compare_meshlab.MESHLAB_METHODS.items() if v}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -74,6 +77,8 @@ def sphere_mesh(n_vertices, radius=1.0):
     Returns vertices (n, 3) with n close to ``n_vertices``, faces (m, 3) int64 (outward
     winding) and exact normals (n, 3). Cell areas vary by less than 1.5x (unlike a UV sphere).
     """
+    from meshcurv import surfaces
+
     m = max(2, int(round(np.sqrt((n_vertices - 2) / 6.0))))
     # grid (m+1) x (m+1) per cube face in the angles a, b in [-pi/4, pi/4]
     t = np.tan(np.linspace(-np.pi / 4, np.pi / 4, m + 1))
@@ -103,10 +108,7 @@ def sphere_mesh(n_vertices, radius=1.0):
     faces = new_index[first[inverse.ravel()]][faces]
     v = p[keep] * radius
     normals = p[keep]
-    fn = np.cross(v[faces[:, 1]] - v[faces[:, 0]], v[faces[:, 2]] - v[faces[:, 0]])
-    flip = np.einsum("ij,ij->i", fn, v[faces].sum(axis=1)) < 0
-    faces[flip] = faces[flip][:, ::-1]
-    return v, faces, normals
+    return v, surfaces.orient_faces(v, faces, normals), normals
 
 
 def torus_cloud(n_points, major=2.0, minor=0.5, seed=0):
@@ -237,13 +239,10 @@ def apss_in_child(v, normals, radius, repeat, timeout):
 def _apss_worker(inp):
     """Child process: run APSS on the point set in ``inp`` and print the timing as JSON."""
     import pymeshlab
-    from scipy.spatial import cKDTree
 
     d = np.load(inp)
     v, normals, radius, repeat = d["vertices"], d["normals"], float(d["radius"]), int(d["repeat"])
-    # APSS support is filterscale x a per-point radius d16 / 2 (MeshLab's computeVertexRaddi)
-    d16 = cKDTree(v).query(v, min(16, len(v)), workers=-1)[0][:, -1]
-    filterscale = float(radius / np.mean(0.5 * d16))
+    filterscale = compare_meshlab.apss_filterscale(v, radius)
     ms = pymeshlab.MeshSet()
     ms.add_mesh(pymeshlab.Mesh(vertex_matrix=v, v_normals_matrix=normals))
 

@@ -67,6 +67,15 @@ MESHLAB_METHODS = {
 # MeshLab, in a child process
 # ---------------------------------------------------------------------------------------------
 
+def apss_filterscale(vertices, radius):
+    """APSS ``filterscale`` whose support matches a ball of ``radius``: MeshLab's support is
+    filterscale x a per-point radius d16 / 2 (its ``computeVertexRaddi``)."""
+    from scipy.spatial import cKDTree
+
+    d16 = cKDTree(vertices).query(vertices, min(16, len(vertices)), workers=-1)[0][:, -1]
+    return float(radius / np.mean(0.5 * d16))
+
+
 def _worker(inp, out):
     """Child process: run one MeshLab method on the mesh in ``inp`` (npz), write ``out`` (npz)."""
     import pymeshlab
@@ -75,20 +84,16 @@ def _worker(inp, out):
     v, f, method, radius = d["vertices"], d["faces"], str(d["method"]), float(d["radius"])
     values, seconds = [], []
     if method == "APSS":
-        from scipy.spatial import cKDTree
-
         if "normals" in d and d["normals"].size:
             normals = d["normals"]
         else:
             normals = pymeshlab.Mesh(v, f).vertex_normal_matrix()
-        k = min(16, len(v))
-        d16 = cKDTree(v).query(v, k)[0][:, -1]
-        filterscale = radius / np.mean(0.5 * d16)
+        filterscale = apss_filterscale(v, radius)
         for ctype in ("K1", "K2"):
             ms = pymeshlab.MeshSet()
             ms.add_mesh(pymeshlab.Mesh(vertex_matrix=v, v_normals_matrix=normals))
             t0 = time.perf_counter()
-            ms.compute_curvature_and_color_apss_per_vertex(filterscale=float(filterscale),
+            ms.compute_curvature_and_color_apss_per_vertex(filterscale=filterscale,
                                                            curvaturetype=ctype)
             seconds.append(time.perf_counter() - t0)
             values.append(ms.current_mesh().vertex_scalar_array().astype(np.float64))

@@ -289,26 +289,18 @@ def output_path_for(input_path, out_dir, suffix="_curvature", extension=".ply"):
 
 
 @contextlib.contextmanager
-def dask_client(scheduler, timeout="20s"):
-    """A ``distributed.Client`` for ``scheduler``: an address (connected here and closed on
-    exit) or an existing Client (used as is). Failures raise CommandError with one line."""
-    if hasattr(scheduler, "submit"):
-        yield scheduler
-        return
+def dask_client(scheduler):
+    """:func:`meshcurv.tiled.connect`, with a one-line error when dask.distributed is missing
+    (an unreachable scheduler raises its one-line OSError)."""
     try:
-        from distributed import Client
+        import distributed  # noqa: F401
     except ImportError:
         raise CommandError("--dask-scheduler needs dask.distributed "
                            "(pip install 'meshcurv[dask]')", 2) from None
-    try:
-        client = Client(scheduler, timeout=timeout)
-    except (OSError, TimeoutError, ValueError) as exc:
-        raise CommandError(f"cannot connect to the Dask scheduler {scheduler}: "
-                           f"{io.first_line(exc)}") from None
-    try:
+    from .tiled import connect
+
+    with connect(scheduler) as client:
         yield client
-    finally:
-        client.close()
 
 
 def run_batch(inputs, out_dir, options=AnnotateOptions(), jobs=1, overwrite=False,

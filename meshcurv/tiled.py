@@ -61,7 +61,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from . import las
-from .io import atomic_write
+from .io import atomic_write, first_line
 
 __all__ = ["TileError", "TiledReport", "TileGrid", "annotate_tiled", "principal_curvatures_tiled"]
 
@@ -533,6 +533,29 @@ def _as_result(arrays, radius):
 # ----------------------------------------------------------------------------- the driver
 
 @contextlib.contextmanager
+def connect(scheduler, timeout="20s"):
+    """A ``distributed.Client`` for ``scheduler``: an address (connected here, waiting at most
+    ``timeout``, and closed on exit) or an existing Client (used as is).
+
+    Raises OSError "cannot connect to the Dask scheduler <address>: <reason>" (one line).
+    """
+    if not isinstance(scheduler, str):
+        yield scheduler
+        return
+    from distributed import Client
+
+    try:
+        client = Client(scheduler, timeout=timeout)
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise OSError(f"cannot connect to the Dask scheduler {scheduler}: "
+                      f"{first_line(exc)}") from None
+    try:
+        yield client
+    finally:
+        client.close()
+
+
+@contextlib.contextmanager
 def _dask_client(scheduler, n_workers, threads_per_task=None):
     """(client, numba threads per task): the given Client, one connected to an address, or a
     LocalCluster of ``n_workers`` one-thread processes, closed on exit.
@@ -544,11 +567,8 @@ def _dask_client(scheduler, n_workers, threads_per_task=None):
 
     if threads_per_task is not None and int(threads_per_task) < 1:
         raise ValueError(f"threads_per_task must be at least 1, got {threads_per_task}")
-    if scheduler is not None and not isinstance(scheduler, str):
-        yield scheduler, threads_per_task
-        return
-    if isinstance(scheduler, str):
-        with Client(scheduler) as client:
+    if scheduler is not None:
+        with connect(scheduler) as client:
             yield client, threads_per_task
         return
     n_workers = int(n_workers or min(os.cpu_count() or 1, 8))
@@ -777,23 +797,24 @@ def annotate_tiled(in_path, out_path, radius=None, tile_size=None, *, orientatio
     st = os.stat(in_path)
     manifest = {"input": in_path, "size": st.st_size, "mtime_ns": st.st_mtime_ns,
                 **_options_manifest(radius, grid, orientation, options, chunk_size)}
-    _prepare_work(work, manifest)
     report = TiledReport(n_points=n_points, n_tiles=0, radius=radius, tile_size=tile_size,
                          halo=grid.halo, out_path=out_path)
     chunk_jobs = {c: (_scatter_file_task, (in_path, s, min(s + chunk_size, n_points), c, grid,
                                            work), {})
                   for c, s in enumerate(range(0, n_points, chunk_size))}
-    try:
-        t_start = time.perf_counter()
-        with _dask_client(scheduler, n_workers, threads_per_task) as (client, threads):
-            report.stage_seconds["start"] = time.perf_counter() - t_start
+    t_start = time.perf_counter()
+    with _dask_client(scheduler, n_workers, threads_per_task) as (client, threads):
+        # connected before the work folder exists: an unreachable scheduler leaves nothing
+        report.stage_seconds["start"] = time.perf_counter() - t_start
+        _prepare_work(work, manifest)
+        try:
             own_tiles = _process(client, threads, work, grid, radius, orientation, options,
                                  chunk_jobs, in_path, progress, measure_memory, report,
                                  has_normals)
-    except las.LasReadError:
-        # an unreadable input leaves nothing worth resuming: a fixed file starts afresh anyway
-        shutil.rmtree(work, ignore_errors=True)
-        raise
+        except las.LasReadError:
+            # an unreadable input leaves nothing worth resuming: a fixed file starts afresh
+            shutil.rmtree(work, ignore_errors=True)
+            raise
     write_normals = not has_normals
     names = list(las.CURVATURE_FIELDS) + (list(las.NORMAL_FIELDS) if write_normals else [])
     kept = []
@@ -876,6 +897,11 @@ def principal_curvatures_tiled(vertices, radius, tile_size, normals=None, *, ori
     n = len(v)
     report = TiledReport(n_points=n, n_tiles=0, radius=radius, tile_size=tile_size, halo=grid.halo)
     with contextlib.ExitStack() as stack:
+        # connected before the work folder exists: an unreachable scheduler leaves nothing
+        t_start = time.perf_counter()
+        client, threads = stack.enter_context(_dask_client(scheduler, n_workers,
+                                                           threads_per_task))
+        report.stage_seconds["start"] = time.perf_counter() - t_start
         work = work_dir or stack.enter_context(tempfile.TemporaryDirectory(prefix="meshcurv-"))
         # an array cannot be recognised again: always start afresh
         _prepare_work(work, {"input": "memory", "n": n, "token": time.time_ns(),
@@ -885,11 +911,8 @@ def principal_curvatures_tiled(vertices, radius, tile_size, normals=None, *, ori
             _scatter(v[s:s + chunk_size], None if nv is None else nv[s:s + chunk_size], s, c,
                      grid, work)
         report.stage_seconds["scatter"] = time.perf_counter() - t_scatter
-        t_start = time.perf_counter()
-        with _dask_client(scheduler, n_workers, threads_per_task) as (client, threads):
-            report.stage_seconds["start"] = time.perf_counter() - t_start
-            own_tiles = _process(client, threads, work, grid, radius, orientation, options, {},
-                                 "<array>", progress, measure_memory, report, nv is not None)
+        own_tiles = _process(client, threads, work, grid, radius, orientation, options, {},
+                             "<array>", progress, measure_memory, report, nv is not None)
         t_write = time.perf_counter()
         parts = [_as_result(_gather(work, own_tiles.get(c, []), c, s, min(chunk_size, n - s)),
                             radius)

@@ -368,3 +368,18 @@ def test_default_tile_size_of_a_flat_cloud_is_a_few_radii_not_zero():
     assert _default_tile_size(10 ** 6, (100.0, 0.0), radius=0.5) == pytest.approx(50 ** 0.5)
     assert _default_tile_size(10 ** 6, (1.0, 0.0), radius=0.5) == 2.0         # floor: 4 radii
     assert _default_tile_size(4 * 10 ** 6, (400.0, 400.0), radius=0.5) == 200.0
+
+
+def test_unreachable_scheduler_fails_in_one_line_and_leaves_no_work_folder(laz_input, tmp_path,
+                                                                          monkeypatch):
+    distributed = pytest.importorskip("distributed")
+    path, _, radius = laz_input
+
+    def refuse(scheduler, timeout="20s"):
+        raise OSError("Timed out trying to connect to tcp://127.0.0.1:9 after 20 s")
+
+    monkeypatch.setattr(distributed, "Client", refuse)
+    before = sorted(os.listdir(tmp_path))
+    with pytest.raises(OSError, match="^cannot connect to the Dask scheduler tcp://127.0.0.1:9: "):
+        annotate_tiled(path, str(tmp_path / "o.laz"), radius, 30.0, scheduler="tcp://127.0.0.1:9")
+    assert sorted(os.listdir(tmp_path)) == before

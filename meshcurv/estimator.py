@@ -2,6 +2,7 @@
 -> Euler (sine) fit -> outputs.
 """
 
+import inspect
 from dataclasses import dataclass
 
 import numpy as np
@@ -12,7 +13,7 @@ from . import kernels, normals as nrm, shape
 from .neighborhoods import (BallGrid, KringWork, ball_grid, ball_neighbors, default_radius,
                             edge_adjacency, kring_neighbors, spatial_order)
 
-__all__ = ["CurvatureResult", "principal_curvatures", "estimate_normals"]
+__all__ = ["CurvatureResult", "principal_curvatures", "estimate_normals", "check_options"]
 
 # Query points per call into the kernels: bounds the memory of the neighbour lists (about
 # 0.8 kB per query point at 100 neighbours) at no measurable cost in speed.
@@ -236,6 +237,38 @@ def estimate_normals(points, radius, progress=False):
     return _mst_normals(v, radius, *_ball_search(v, finite, radius), progress)
 
 
+def check_options(**options):
+    """Check option names and values of :func:`principal_curvatures` without running it.
+
+    Raises ValueError for an unknown name or a value out of its set; returns ``orientation``
+    ("mst" or a (3,) float64 viewpoint).
+    """
+    try:
+        inspect.signature(principal_curvatures).bind_partial(**options)
+    except TypeError as exc:
+        raise ValueError(f"unknown estimator option: {exc}") from None
+    choices = {"neighborhood": ("auto", "kring", "ball"),
+               "normal_estimation": ("auto", "faces", "pca"),
+               "weighting": ("auto", "distance", "none"),
+               "circle_normalization": ("tangent", "unit")}
+    for name, allowed in choices.items():
+        if name in options and options[name] not in allowed:
+            raise ValueError(f"{name} must be one of {', '.join(map(repr, allowed))}, "
+                             f"got {options[name]!r}")
+    if "n_directions" in options and int(options["n_directions"]) < 3:
+        raise ValueError(f"n_directions must be at least 3, got {options['n_directions']}")
+    orientation = options.get("orientation", "mst")
+    if isinstance(orientation, str) and orientation == "mst":
+        return orientation
+    if not isinstance(orientation, str):
+        orientation = np.asarray(orientation, dtype=np.float64)
+    if isinstance(orientation, str) or orientation.shape != (3,) or not np.isfinite(
+            orientation).all():
+        raise ValueError(f"orientation must be 'mst' or a finite (3,) viewpoint, "
+                         f"got {options['orientation']!r}")
+    return orientation
+
+
 def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_directions=8,
                          neighborhood="auto", *, slab=0.25, min_points=3, min_spread=0.25,
                          weighting="auto", circle_normalization="tangent",
@@ -350,22 +383,12 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
     """
     v, f, given_normals = _as_arrays(vertices, faces, normals)
     n = len(v)
-    if neighborhood not in ("auto", "kring", "ball"):
-        raise ValueError(f"neighborhood must be 'auto', 'kring' or 'ball', got {neighborhood!r}")
-    if normal_estimation not in ("auto", "faces", "pca"):
-        raise ValueError(f"normal_estimation must be 'auto', 'faces' or 'pca', got {normal_estimation!r}")
-    if not (isinstance(orientation, str) and orientation == "mst"):
-        orientation = np.asarray(orientation, dtype=np.float64)
-        if orientation.shape != (3,):
-            raise ValueError("orientation must be 'mst' or a (3,) viewpoint")
+    orientation = check_options(neighborhood=neighborhood, normal_estimation=normal_estimation,
+                                orientation=orientation, weighting=weighting,
+                                circle_normalization=circle_normalization,
+                                n_directions=n_directions)
     if neighborhood == "kring" and f is None:
         raise ValueError("neighborhood='kring' needs faces")
-    if weighting not in ("auto", "distance", "none"):
-        raise ValueError(f"weighting must be 'auto', 'distance' or 'none', got {weighting!r}")
-    if circle_normalization not in ("tangent", "unit"):
-        raise ValueError(f"circle_normalization must be 'tangent' or 'unit', got {circle_normalization!r}")
-    if int(n_directions) < 3:
-        raise ValueError(f"n_directions must be at least 3, got {n_directions}")
     use_kring = f is not None and neighborhood != "ball"
     if query is None:
         query = np.arange(n, dtype=np.int64)

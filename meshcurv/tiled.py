@@ -617,20 +617,10 @@ def _options_manifest(radius, grid, orientation, options, chunk_size):
             "options": {k: options[k] for k in sorted(options)}}
 
 
-def _check_orientation(orientation):
-    if isinstance(orientation, str):
-        if orientation != "mst":
-            raise ValueError(f"orientation must be 'mst' or a (3,) viewpoint, got {orientation!r}")
-        return orientation
-    vp = np.asarray(orientation, dtype=np.float64)
-    if vp.shape != (3,) or not np.isfinite(vp).all():
-        raise ValueError("orientation must be 'mst' or a finite (3,) viewpoint")
-    return tuple(float(c) for c in vp)
-
-
-def _check_options(options):
-    """Reject estimator options the tiled run cannot take, before any work starts."""
-    from .estimator import principal_curvatures
+def _check_options(orientation, options):
+    """Reject estimator options the tiled run cannot take, before any work starts; returns
+    ``orientation`` as "mst" or a tuple (sent to every task)."""
+    from .estimator import check_options
 
     reserved = sorted(set(options) & set(_RESERVED))
     if reserved:
@@ -639,13 +629,8 @@ def _check_options(options):
         raise ValueError("tiled runs are for point clouds: neighborhood must be 'ball'")
     if options.get("normal_estimation", "pca") not in ("auto", "pca"):
         raise ValueError("tiled runs are for point clouds: normal_estimation must be 'pca'")
-    # a 3 x 3 grid: wrong names or values raise here, not on every worker
-    g = np.stack(np.meshgrid(np.arange(3.0), np.arange(3.0), indexing="ij"), -1).reshape(-1, 2)
-    try:
-        principal_curvatures(np.column_stack([g, np.zeros(9)]), radius=1.5,
-                             orientation=(1.0, 1.0, 10.0), query=[4], **options)
-    except TypeError as e:
-        raise ValueError(f"unknown estimator option: {e}") from e
+    orientation = check_options(orientation=orientation, **options)
+    return orientation if isinstance(orientation, str) else tuple(map(float, orientation))
 
 
 def _process(client, threads, work, grid, radius, orientation, options, chunk_jobs, in_path,
@@ -766,8 +751,7 @@ def annotate_tiled(in_path, out_path, radius=None, tile_size=None, *, orientatio
     t0 = time.perf_counter()
     in_path, out_path = os.path.abspath(in_path), os.path.abspath(out_path)
     las._check_paths(in_path, out_path)
-    orientation = _check_orientation(orientation)
-    _check_options(options)
+    orientation = _check_options(orientation, options)
     chunk_size = int(chunk_size)
     if chunk_size < 1:
         raise ValueError(f"chunk_size must be a positive number of points, got {chunk_size}")
@@ -884,8 +868,7 @@ def principal_curvatures_tiled(vertices, radius, tile_size, normals=None, *, ori
         nv = np.asarray(normals, dtype=np.float64)
         if nv.shape != v.shape:
             raise ValueError(f"normals must have the shape of vertices {v.shape}, got {nv.shape}")
-    orientation = _check_orientation(orientation)
-    _check_options(options)
+    orientation = _check_options(orientation, options)
     if isinstance(radius, str):
         raise ValueError(f"tiled runs need a radius in model units, got {radius!r}")
     radius, tile_size, chunk_size = float(radius), float(tile_size), int(chunk_size)

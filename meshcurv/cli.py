@@ -89,12 +89,13 @@ def parse_radius(text):
     return value, percent
 
 
-def _radius_in_model_units(spec, vertices):
-    """Absolute radius for ``spec`` ("2%", "0.05" or None = the estimator's default)."""
+def _radius_in_model_units(spec, diagonal):
+    """Absolute radius for ``spec`` ("2%", "0.05" or None = the estimator's default);
+    ``diagonal()`` gives the bounding-box diagonal a percentage refers to."""
     if spec is None:
         return None
     value, percent = parse_radius(spec)
-    return value / 100.0 * io.bbox_diagonal(vertices) if percent else value
+    return value / 100.0 * diagonal() if percent else value
 
 
 def _check_options(options):
@@ -147,7 +148,7 @@ def annotate_file(input_path, output_path, options=AnnotateOptions(), preview=No
     if n_finite < 4:
         raise io.MeshFileError(f"{input_path}: too few points ({n_finite}) for a curvature "
                                "estimate")
-    radius = _radius_in_model_units(options.radius, data.vertices)
+    radius = _radius_in_model_units(options.radius, lambda: io.bbox_diagonal(data.vertices))
     try:
         result = principal_curvatures(
             data.vertices, None if data.is_point_cloud else data.faces,
@@ -566,14 +567,11 @@ def build_parser():
 
 def _las_bbox_diagonal(path):
     """Bounding-box diagonal from a LAS/LAZ header (for ``--radius 2%`` on tiled runs)."""
-    import laspy
+    from .las import _open
 
-    try:
-        with laspy.open(path) as reader:
-            lo = np.asarray(reader.header.mins, float)
-            hi = np.asarray(reader.header.maxs, float)
-    except Exception as exc:  # laspy raises many types on a bad header
-        raise io.MeshFileError(f"{path}: not a readable LAS/LAZ file ({exc})") from exc
+    with _open(path) as reader:
+        lo = np.asarray(reader.header.mins, float)
+        hi = np.asarray(reader.header.maxs, float)
     return float(np.linalg.norm(hi - lo))
 
 
@@ -600,10 +598,7 @@ def _cmd_annotate_tiled(args, options):
     except ImportError as exc:
         raise CommandError(f"--tile-size/--dask-scheduler need dask.distributed and laspy "
                            f"(pip install 'meshcurv[dask,las]'): {exc}", 2) from None
-    radius = None
-    if options.radius is not None:
-        value, percent = parse_radius(options.radius)
-        radius = value / 100.0 * _las_bbox_diagonal(args.input) if percent else value
+    radius = _radius_in_model_units(options.radius, lambda: _las_bbox_diagonal(args.input))
     with contextlib.ExitStack() as stack:
         # connect first: an unreachable scheduler then leaves no work folder behind
         client = (None if args.dask_scheduler is None

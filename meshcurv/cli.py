@@ -314,7 +314,11 @@ def run_batch(inputs, out_dir, options=AnnotateOptions(), jobs=1, overwrite=Fals
     scheduler address or a ``distributed.Client``) runs the files on a Dask cluster whose
     workers see the same paths: only paths and options travel, never mesh data.
     """
-    inputs = [os.path.abspath(p) for p in _expand_inputs(inputs)]
+    expanded = [os.path.abspath(p) for p in _expand_inputs(inputs)]
+    if not expanded:
+        raise CommandError(f"no input files in {' '.join(map(str, inputs))} (readable: "
+                           f"{', '.join(sorted(io.READERS))})", 2)
+    inputs = expanded
     out_dir = os.path.abspath(out_dir)
     outputs = [output_path_for(p, out_dir) for p in inputs]
     seen = {}
@@ -655,9 +659,6 @@ def _cmd_batch(args):
     _check_options(options)
     if args.jobs < 1:
         raise CommandError("--jobs must be at least 1", 2)
-    if not _expand_inputs(args.inputs):
-        raise CommandError(f"no input files in {' '.join(args.inputs)} (readable: "
-                           f"{', '.join(sorted(io.READERS))})", 2)
     results = run_batch(args.inputs, args.out_dir, options, jobs=args.jobs,
                         overwrite=args.overwrite, scheduler=args.dask_scheduler)
     counts = {s: sum(r["status"] == s for r in results) for s in ("ok", "skipped", "failed")}

@@ -511,6 +511,18 @@ _JET_U = np.array([2, 1, 0, 1, 0, 0, 3, 2, 1, 0])
 _JET_V = np.array([0, 1, 2, 0, 1, 0, 0, 1, 2, 3])
 
 
+@njit(cache=True)
+def _add_monomials(moments, c, u, v, degree):
+    """``moments[a, b] += c u^a v^b`` for every a + b <= ``degree``."""
+    cua = c
+    for a in range(degree + 1):
+        cuv = cua
+        for b in range(degree + 1 - a):
+            moments[a, b] += cuv
+            cuv *= v
+        cua *= u
+
+
 @njit(parallel=True, cache=True)
 def local_jet(points, query_points, normals, indptr, indices, radius, refine, noise):
     """Local height fits around each query point: noise level (cubic) and normal (quadric).
@@ -587,20 +599,8 @@ def local_jet(points, query_points, normals, indptr, indices, radius, refine, no
                 v = qx * b0 + qy * b1 + qz * b2
                 h = qx * n0 + qy * n1 + qz * n2
                 w = 1.0 - r2
-                wua = w
-                for a in range(7):
-                    wuv = wua
-                    for b in range(7 - a):
-                        mom[a, b] += wuv
-                        wuv *= v
-                    wua *= u
-                wua = w * h
-                for a in range(4):
-                    wuv = wua
-                    for b in range(4 - a):
-                        hmom[a, b] += wuv
-                        wuv *= v
-                    wua *= u
+                _add_monomials(mom, w, u, v, 6)
+                _add_monomials(hmom, w * h, u, v, 3)
                 sw += w
                 swhh += w * h * h
                 count += 1

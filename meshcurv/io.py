@@ -8,11 +8,11 @@ Readers and writers are looked up by file extension in :data:`READERS` and :data
 :func:`register_reader` / :func:`register_writer` add formats.
 
 The annotated PLY (:func:`write_annotated`) is binary little-endian with named vertex
-properties: ``x y z nx ny nz`` (float64), ``k1 k2 mean gaussian shape_index curvedness``
-(float64, NaN where invalid), ``valid`` (uint8), ``d1x d1y d1z d2x d2y d2z`` (float64),
-``n_neighbors n_samples`` (int32), ``residual`` (float64), each of these named
+properties: ``x y z nx ny nz`` (float64); the fields ``k1 k2 mean gaussian shape_index
+curvedness`` (float64, NaN where invalid), ``valid`` (uint8), ``d1x d1y d1z d2x d2y d2z``
+(float64), ``n_neighbors n_samples`` (int32) and ``residual`` (float64), each named
 ``scalar_<field>`` in the file (``scalar_k1``: CloudCompare's spelling, the only one it loads as
-a scalar field), then ``quality`` (float64, the chosen field with 0 where invalid) and
+a scalar field); then ``quality`` (float64, the chosen field with 0 where invalid) and
 ``red green blue`` (uint8), plus the ``face`` element. plyfile and Open3D read every property at
 full precision (by its file name, ``scalar_k1``); :func:`read` drops the prefix again.
 CloudCompare loads the ``scalar_`` fields in single precision; MeshLab and pymeshlab keep only

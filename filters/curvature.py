@@ -123,6 +123,10 @@ def compute_curvature_cga_per_vertex(self, radius=None, ndirections=8, neighborh
       there is no estimate) and ``valid`` (1 or 0)
     * custom point attributes ``d1, d2``: unit principal directions (NaN where invalid)
 
+    ``ms.save_current_mesh`` writes only quality and colour of these; save them all with
+    :func:`meshcurv.filters.save_curvature_mesh` and read such a file back, fields included,
+    with :func:`meshcurv.filters.load_curvature_mesh`.
+
     Running the filter again overwrites these attributes. MeshLab cannot delete or refill an
     attribute from Python, so the new values pass through carrier attributes
     ``meshcurv_tmp_<k>`` that stay on the mesh (and are not saved by ``save_current_mesh``).
@@ -170,7 +174,7 @@ def compute_curvature_cga_per_vertex(self, radius=None, ndirections=8, neighborh
     >>> ms.create_torus(hradius=2.0, vradius=0.5)                          # doctest: +SKIP
     >>> out = ms.compute_curvature_cga_per_vertex(radius=pymeshlab.PercentageValue(4),
     ...                                           quality="shape_index")   # doctest: +SKIP
-    >>> ms.save_current_mesh("torus_si.ply")                               # doctest: +SKIP
+    >>> meshcurv.filters.save_curvature_mesh(ms, "torus_si.ply")           # doctest: +SKIP
     """
     if quality not in shape.FIELDS:
         raise ValueError(f"quality must be one of {', '.join(shape.FIELDS)}, got {quality!r}")

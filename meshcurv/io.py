@@ -8,11 +8,15 @@ Readers and writers are looked up by file extension in :data:`READERS` and :data
 :func:`register_reader` / :func:`register_writer` add formats.
 
 The annotated PLY (:func:`write_annotated`) is binary little-endian with named vertex
-properties: ``x y z nx ny nz`` (float64), ``k1 k2 mean gaussian shape_index curvedness``
-(float64, NaN where invalid), ``valid`` (uint8), ``d1x d1y d1z d2x d2y d2z`` (float64),
-``n_neighbors n_samples`` (int32), ``residual`` (float64), ``quality`` (float64, the chosen
-field with 0 where invalid) and ``red green blue`` (uint8), plus the ``face`` element.
-plyfile, Open3D and MeshLab read these at full precision.
+properties: ``x y z nx ny nz`` (float64); the fields ``k1 k2 mean gaussian shape_index
+curvedness`` (float64, NaN where invalid), ``valid`` (uint8), ``d1x d1y d1z d2x d2y d2z``
+(float64), ``n_neighbors n_samples`` (int32) and ``residual`` (float64), each named
+``scalar_<field>`` in the file (``scalar_k1``: CloudCompare's spelling, the only one it loads as
+a scalar field); then ``quality`` (float64, the chosen field with 0 where invalid) and
+``red green blue`` (uint8), plus the ``face`` element. plyfile and Open3D read every property at
+full precision (by its file name, ``scalar_k1``); :func:`read` drops the prefix again.
+CloudCompare loads the ``scalar_`` fields in single precision; MeshLab and pymeshlab keep only
+normals, ``quality`` and colour (see :mod:`meshcurv.filters` for the fields in pymeshlab).
 
 LAS/LAZ point clouds (optional extra ``las``: laspy + lazrs) are read into memory by
 :func:`read_las`; :func:`write_las` copies the input's points unchanged and adds the curvature
@@ -31,7 +35,7 @@ from . import shape
 __all__ = ["MeshData", "MeshFileError", "READERS", "WRITERS", "register_reader",
            "register_writer", "read", "write", "write_ply", "write_annotated", "atomic_write",
            "check_distinct", "bbox_diagonal", "CURVATURE_FIELDS", "ANNOTATED_FIELDS",
-           "curvature_fields"]
+           "curvature_fields", "PLY_PREFIX", "ply_property", "ply_field_names"]
 
 # Per-vertex curvature fields of every annotated file (PLY properties, LAS extra bytes).
 CURVATURE_FIELDS = shape.FIELDS + ("valid", "d1x", "d1y", "d1z", "d2x", "d2y", "d2z")
@@ -39,6 +43,35 @@ CURVATURE_FIELDS = shape.FIELDS + ("valid", "d1x", "d1y", "d1z", "d2x", "d2y", "
 ANNOTATED_FIELDS = CURVATURE_FIELDS + ("n_neighbors", "n_samples", "residual", "quality")
 _GEOMETRY = ("x", "y", "z", "nx", "ny", "nz")
 _COLOR = ("red", "green", "blue", "alpha")
+
+# PLY spelling of the annotated fields. CloudCompare loads a vertex property as a scalar field
+# only if its name contains "scal" (and strips the "scalar_" it writes itself, showing "k1");
+# MeshLab keeps no extra vertex property whatever its name. So every annotated field is written
+# as scalar_<field>, except quality, which MeshLab and pymeshlab read under that name.
+PLY_PREFIX = "scalar_"
+
+
+def ply_property(field):
+    """PLY vertex property name of an annotated field: ``scalar_<field>`` for the fields of
+    :data:`ANNOTATED_FIELDS` except ``quality``; any other name unchanged.
+
+    >>> ply_property("k1"), ply_property("quality"), ply_property("intensity")
+    ('scalar_k1', 'quality', 'intensity')
+    """
+    return PLY_PREFIX + field if field in ANNOTATED_FIELDS and field != "quality" else field
+
+
+def ply_field_names(properties):
+    """Field name of each PLY vertex property, ``{property: field}``: ``scalar_k1`` -> ``k1``
+    for the annotated fields (so files written before the prefix, with plain ``k1``, read the
+    same); other names unchanged, and both kept as they are when a file has both spellings."""
+    properties = tuple(properties)
+    out = {}
+    for p in properties:
+        field = p[len(PLY_PREFIX):] if p.startswith(PLY_PREFIX) else p
+        renamed = field != p and field in ANNOTATED_FIELDS and field != "quality"
+        out[p] = field if renamed and field not in properties else p
+    return out
 
 
 class MeshFileError(ValueError):
@@ -114,7 +147,8 @@ def read_ply(path):
 
     Faces are read from the ``face`` element (``vertex_indices`` or ``vertex_index``);
     polygons are fan-triangulated. ``nx ny nz`` become ``normals``; every other vertex property
-    except ``x y z`` and colour goes to ``fields`` unchanged (same dtype).
+    except ``x y z`` and colour goes to ``fields`` unchanged (same dtype), the annotated fields
+    under their own names (``scalar_k1`` as ``k1``, see :func:`ply_field_names`).
     """
     from plyfile import PlyData
 
@@ -131,7 +165,9 @@ def read_ply(path):
     if all(c in props for c in ("nx", "ny", "nz")):
         normals = np.column_stack([np.asarray(vert[c], dtype=np.float64)
                                    for c in ("nx", "ny", "nz")])
-    fields = {p: np.asarray(vert[p]) for p in props if p not in _GEOMETRY and p not in _COLOR}
+    field_names = ply_field_names(props)
+    fields = {field_names[p]: np.asarray(vert[p]) for p in props
+              if p not in _GEOMETRY and p not in _COLOR}
     faces = None
     if "face" in names:
         fdata = ply["face"].data
@@ -406,8 +442,10 @@ def write_annotated(path, data, result, quality="mean", colormap="Turbo", clamp=
         colour; invalid vertices get quality 0 and grey (the named fields keep NaN).
     colormap, clamp : colour ramp, see :func:`meshcurv.shape.colorize`
 
-    Other per-vertex properties of the input PLY (``data.fields``) are kept unless an annotated
-    field has the same name.
+    The curvature fields are named ``scalar_<field>`` in the file (``scalar_k1``, see
+    :func:`ply_property`), the name under which CloudCompare loads them as scalar fields;
+    :func:`read` gives them back as ``fields["k1"]``. Other per-vertex properties of the input
+    PLY (``data.fields``) are kept unless an annotated field has the same name.
     """
     if _extension(path) != ".ply":
         raise MeshFileError(f"{path}: annotated output must be a .ply file")
@@ -419,7 +457,8 @@ def write_annotated(path, data, result, quality="mean", colormap="Turbo", clamp=
     if quality not in shape.FIELDS:
         raise ValueError(f"quality must be one of {', '.join(shape.FIELDS)}, got {quality!r}")
     values = curvature_fields(result)
-    ours = set(_GEOMETRY) | set(_COLOR) | set(ANNOTATED_FIELDS)
+    ours = (set(_GEOMETRY) | set(_COLOR) | set(ANNOTATED_FIELDS)
+            | {ply_property(f) for f in ANNOTATED_FIELDS})
     fields = {k: v for k, v in data.fields.items() if k not in ours}
     fields.update({"nx": result.normals[:, 0], "ny": result.normals[:, 1],
                    "nz": result.normals[:, 2]})
@@ -431,7 +470,8 @@ def write_annotated(path, data, result, quality="mean", colormap="Turbo", clamp=
     rgb = shape.colorize(np.where(result.valid, values[quality], np.nan), quality, colormap, clamp)
     for i, c in enumerate(("red", "green", "blue")):
         fields[c] = rgb[:, i]
-    write_ply(path, data.vertices, None if data.is_point_cloud else data.faces, fields)
+    write_ply(path, data.vertices, None if data.is_point_cloud else data.faces,
+              {ply_property(k): v for k, v in fields.items()})
 
 
 def write_las(path, data, result, quality=None, colormap=None, clamp=None):

@@ -68,10 +68,10 @@ def test_annotate_writes_the_api_arrays_bit_for_bit(tmp_path, capsys, inputs, to
     assert not ply.text
     v = ply["vertex"].data
     for name in shape.FIELDS:
-        assert _bits(v[name]) == _bits(getattr(res, name)), name
+        assert _bits(v["scalar_" + name]) == _bits(getattr(res, name)), name
     for i, c in enumerate("xyz"):
-        assert _bits(v["d1" + c]) == _bits(res.d1[:, i])
-        assert _bits(v["d2" + c]) == _bits(res.d2[:, i])
+        assert _bits(v["scalar_d1" + c]) == _bits(res.d1[:, i])
+        assert _bits(v["scalar_d2" + c]) == _bits(res.d2[:, i])
     assert _bits(v["quality"]) == _bits(np.where(res.valid, res.shape_index, 0.0))
     np.testing.assert_array_equal(np.stack(ply["face"].data["vertex_indices"]), torus.faces)
 

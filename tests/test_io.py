@@ -37,12 +37,13 @@ def test_annotated_ply_fields_are_bit_identical_to_api_arrays(tmp_path, torus, t
                 "d2x": res.d2[:, 0], "d2y": res.d2[:, 1], "d2z": res.d2[:, 2],
                 "residual": res.residual, "quality": np.where(res.valid, res.k2, 0.0)}
     for name, arr in expected.items():
+        name = io.ply_property(name)  # scalar_k1 in the file (CloudCompare's spelling)
         assert v[name].dtype == np.float64, name
         # bit-identical: equal bytes, NaN included
         assert v[name].tobytes() == np.ascontiguousarray(arr, dtype="<f8").tobytes(), name
-    assert v["valid"].dtype == np.uint8
-    np.testing.assert_array_equal(v["valid"], res.valid)
-    np.testing.assert_array_equal(v["n_neighbors"], res.n_neighbors)
+    assert v["scalar_valid"].dtype == np.uint8
+    np.testing.assert_array_equal(v["scalar_valid"], res.valid)
+    np.testing.assert_array_equal(v["scalar_n_neighbors"], res.n_neighbors)
     rgb = np.column_stack([v["red"], v["green"], v["blue"]])
     np.testing.assert_array_equal(rgb, shape.colorize(np.where(res.valid, res.k2, np.nan), "k2"))
     np.testing.assert_array_equal(np.stack(ply["face"].data["vertex_indices"]), torus.faces)

@@ -737,6 +737,9 @@ def annotate_tiled(in_path, out_path, radius=None, tile_size=None, *, orientatio
 
     Raises
     ------
+    ValueError
+        Bad arguments, or an input that already has curvature dimensions (an annotated file);
+        raised before any work.
     LasReadError
         Unreadable or truncated input; names the file and the points. No output is written.
     TileError
@@ -755,6 +758,8 @@ def annotate_tiled(in_path, out_path, radius=None, tile_size=None, *, orientatio
     chunk_size = int(chunk_size)
     if chunk_size < 1:
         raise ValueError(f"chunk_size must be a positive number of points, got {chunk_size}")
+    # an annotated input is refused now, not after the whole computation
+    names = las.check_annotatable(in_path)
     with las._open(in_path) as reader:
         header = reader.header
         n_points = int(header.point_count)
@@ -800,7 +805,6 @@ def annotate_tiled(in_path, out_path, radius=None, tile_size=None, *, orientatio
             shutil.rmtree(work, ignore_errors=True)
             raise
     write_normals = not has_normals
-    names = list(las.CURVATURE_FIELDS) + (list(las.NORMAL_FIELDS) if write_normals else [])
     kept = []
 
     def fields_for(first, count):

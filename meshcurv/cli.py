@@ -631,6 +631,12 @@ def _cmd_annotate_tiled(args, options):
         except TileError as exc:
             raise CommandError(f"{io.first_line(exc)} (finished tiles are kept "
                                f"in {args.output}.meshcurv-work; re-run to resume)") from None
+        except KeyboardInterrupt:
+            work = f"{args.output}.meshcurv-work"
+            print("meshcurv: interrupted" + (f"; finished tiles are kept in {work}, re-run to "
+                                             "resume" if os.path.isdir(work) else ""),
+                  file=sys.stderr)
+            return 130
     print(f"{args.output}: {report.n_points} points in {report.n_tiles} tiles of side "
           f"{report.tile_size:.6g} (model units), radius {report.radius:.6g} (model units), "
           f"{report.seconds:.1f} s")

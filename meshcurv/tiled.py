@@ -51,6 +51,7 @@ Normal orientation across tiles
 
 import contextlib
 import json
+import logging
 import os
 import shutil
 import tempfile
@@ -572,9 +573,77 @@ def _dask_client(scheduler, n_workers, threads_per_task=None):
             yield client, threads_per_task
         return
     n_workers = int(n_workers or min(os.cpu_count() or 1, 8))
-    with LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
-                      dashboard_address=None) as cluster, Client(cluster) as client:
-        yield client, threads_per_task or max(1, (os.cpu_count() or 1) // n_workers)
+    cluster = None
+    try:
+        with _workers_ignore_sigint():
+            cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
+                                   dashboard_address=None)
+        with Client(cluster) as client:
+            client.run(_quiet_worker)
+            yield client, threads_per_task or max(1, (os.cpu_count() or 1) // n_workers)
+    except BaseException:
+        # interrupted or failed: the caller reports it in one line; the scheduler and nannies
+        # in this process would add warnings about the workers they stop
+        _set_distributed_log_level(logging.CRITICAL)
+        raise
+    finally:
+        if cluster is not None:
+            try:
+                cluster.close()
+            finally:
+                _set_distributed_log_level(None)
+
+
+@contextlib.contextmanager
+def _workers_ignore_sigint():
+    """Ignore SIGINT in this process while a LocalCluster starts its worker processes.
+
+    The workers inherit the ignored signal, so a Ctrl-C in the terminal (sent to the whole
+    process group) reaches only the driver, which closes the cluster and reports one line,
+    instead of every worker printing a KeyboardInterrupt traceback. A Ctrl-C during these
+    seconds of start-up is lost; workers restarted later get it again (see _quiet_worker).
+    """
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
+
+
+def _quiet_worker():
+    """Run in each worker process of our LocalCluster: the driver reports a failed task in one
+    line (tile and reason), so the worker's own log of it (a multi-line "Compute Failed" block)
+    and its warnings while the cluster shuts down are not printed. A Ctrl-C is for the driver."""
+    import signal
+    import threading
+
+    for name in ("distributed", "distributed.worker"):
+        logging.getLogger(name).setLevel(logging.CRITICAL)
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+_SAVED_LOG_LEVELS = {}
+
+
+def _set_distributed_log_level(level):
+    """Set the level of distributed's loggers in this process; None restores them."""
+    names = ("distributed", "distributed.scheduler", "distributed.nanny", "distributed.worker",
+             "distributed.core", "distributed.client", "distributed.deploy.spec")
+    for name in names:
+        logger = logging.getLogger(name)
+        if level is None:
+            if name in _SAVED_LOG_LEVELS:
+                logger.setLevel(_SAVED_LOG_LEVELS.pop(name))
+        else:
+            _SAVED_LOG_LEVELS.setdefault(name, logger.level)
+            logger.setLevel(level)
 
 
 def _run(client, jobs, desc, unit, in_path, progress):

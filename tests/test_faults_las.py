@@ -1,7 +1,9 @@
 """LAS/LAZ and tiled runs under faults: LAS 1.0 inputs, annotated inputs refused before any work,
 ``info`` of annotated LAS/LAZ, Ctrl-C and failing tiles in one line."""
 
+import glob
 import os
+import shutil
 
 import laspy
 import numpy as np
@@ -169,3 +171,99 @@ def test_info_of_a_plain_las_still_says_not_annotated(las10, capsys):
     path, _ = las10
     assert cli.main(["info", path]) == 0
     assert "not annotated" in capsys.readouterr().out
+
+
+# ----------------------------------------------------------------------------- tiled runs: noise
+
+def _tiled_las(path, n, side, seed=0):
+    """A point format 1 LAS 1.2 file of a wavy height field (see tests/test_tiled.py)."""
+    rng = np.random.default_rng(seed)
+    xy = rng.uniform(0.0, side, (n, 2))
+    z = 0.04 * side * np.sin(6.0 * xy[:, 0] / side) * np.cos(5.0 * xy[:, 1] / side)
+    header = laspy.LasHeader(point_format=1, version="1.2")
+    header.scales, header.offsets = [1e-4] * 3, [0.0] * 3
+    data = laspy.LasData(header)
+    data.x, data.y, data.z = xy[:, 0], xy[:, 1], z
+    data.write(path)
+
+
+def _meshcurv(*args, **popen):
+    import subprocess
+    import sys
+
+    return subprocess.Popen([sys.executable, "-m", "meshcurv", *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, **popen)
+
+
+def _stderr_lines(text):
+    return [ln for ln in text.splitlines() if ln.strip() and "compiling the numba" not in ln]
+
+
+def test_failing_tile_task_is_one_line_naming_the_tile(tmp_path):
+    from meshcurv.tiled import annotate_tiled
+
+    src, out = str(tmp_path / "scan.las"), str(tmp_path / "scan_curv.las")
+    _tiled_las(src, 8000, 80.0)
+    work = out + ".meshcurv-work"
+    # the work folder of a finished run, as the CLI makes it (same options), kept
+    annotate_tiled(src, out, 2.0, 20.0, n_workers=2, progress=False, keep_work=True,
+                   n_directions=8, neighborhood="auto")
+    os.remove(out)
+    broken = "t_1_2"
+    shutil.rmtree(os.path.join(work, "results", broken))
+    for name in os.listdir(os.path.join(work, "normals")):
+        if name.startswith(broken + "."):
+            os.remove(os.path.join(work, "normals", name))
+    for piece in glob.glob(os.path.join(work, "pieces", broken, "*.npz")):
+        with open(piece, "wb") as fh:
+            fh.write(b"not an npz file")
+    proc = _meshcurv("annotate", src, "-o", out, "--radius", "2", "--tile-size", "20")
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 1
+    lines = _stderr_lines(err)
+    assert len(lines) == 1, err  # the worker's "Compute Failed" block is not printed
+    assert lines[0].startswith(f"meshcurv: error: tile {broken} of {src}: ")
+    assert lines[0].endswith(f"(finished tiles are kept in {out}.meshcurv-work; re-run to "
+                             "resume)")
+    assert not os.path.exists(out)
+
+
+def test_ctrl_c_of_a_tiled_run_is_one_line_exit_130_and_no_process_left(tmp_path):
+    import signal
+    import time
+
+    src, out = str(tmp_path / "big.las"), str(tmp_path / "big_curv.las")
+    _tiled_las(src, 200_000, 450.0, seed=1)
+    work = out + ".meshcurv-work"
+    proc = _meshcurv("annotate", src, "-o", out, "--radius", "3.1", "--tile-size", "60",
+                     start_new_session=True)
+    try:
+        deadline = time.monotonic() + 60
+        # the work folder is made once the cluster is up; interrupt a little later, mid-run
+        while not os.path.isdir(os.path.join(work, "chunks")) and proc.poll() is None:
+            assert time.monotonic() < deadline, "the tiled run did not start"
+            time.sleep(0.1)
+        time.sleep(1.0)
+        assert proc.poll() is None, "the run ended before the interrupt"
+        os.killpg(proc.pid, signal.SIGINT)  # as a terminal does: the whole process group
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130
+    assert _stderr_lines(err) == [f"meshcurv: interrupted; finished tiles are kept in {work}, "
+                                  "re-run to resume"]
+    assert not os.path.exists(out) and os.path.isdir(work)
+    # the cluster's workers went with it (they share the process group)
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        try:
+            os.killpg(proc.pid, 0)
+        except ProcessLookupError:
+            break
+        time.sleep(0.2)
+    else:
+        import subprocess
+        left = subprocess.run(["ps", "-o", "pid,etime,cmd", "-g", str(proc.pid)],
+                              capture_output=True, text=True).stdout
+        raise AssertionError(f"processes left in the run's group:\n{left}")

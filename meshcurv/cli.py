@@ -579,6 +579,18 @@ def _las_bbox_diagonal(path):
     return float(np.linalg.norm(hi - lo))
 
 
+def _check_las_output(in_path, out_path):
+    """Before any work on a LAS/LAZ output: refuse an input that already has curvature
+    dimensions, and say when the output gets another LAS version than the input (1.0)."""
+    las = io._las_module(in_path)
+    las.check_annotatable(in_path)
+    version_in, version_out = las.output_version(in_path)
+    if version_out != version_in:
+        print(f"meshcurv: note: {in_path} is LAS {version_in}, which laspy cannot write; "
+              f"{out_path} will be LAS {version_out} with the same point format and "
+              "dimensions", file=sys.stderr)
+
+
 def _cmd_annotate_tiled(args, options):
     """``annotate --tile-size/--dask-scheduler``: hand the LAS/LAZ file to annotate_tiled."""
     las_ext = (".las", ".laz")
@@ -597,6 +609,7 @@ def _cmd_annotate_tiled(args, options):
                            "estimate them otherwise (--normals auto)", 2)
     if not os.path.isfile(args.input):
         raise io.MeshFileError(f"{args.input}: no such file")
+    _check_las_output(args.input, args.output)
     try:
         from .tiled import TileError, annotate_tiled
     except ImportError as exc:
@@ -618,6 +631,12 @@ def _cmd_annotate_tiled(args, options):
         except TileError as exc:
             raise CommandError(f"{io.first_line(exc)} (finished tiles are kept "
                                f"in {args.output}.meshcurv-work; re-run to resume)") from None
+        except KeyboardInterrupt:
+            work = f"{args.output}.meshcurv-work"
+            print("meshcurv: interrupted" + (f"; finished tiles are kept in {work}, re-run to "
+                                             "resume" if os.path.isdir(work) else ""),
+                  file=sys.stderr)
+            return 130
     print(f"{args.output}: {report.n_points} points in {report.n_tiles} tiles of side "
           f"{report.tile_size:.6g} (model units), radius {report.radius:.6g} (model units), "
           f"{report.seconds:.1f} s")
@@ -642,6 +661,8 @@ def _cmd_annotate(args):
         io.check_distinct(args.input, args.output)
     except io.MeshFileError as exc:
         raise CommandError(str(exc), 2) from None
+    if io._extension(args.output) in las_ext and os.path.isfile(args.input):
+        _check_las_output(args.input, args.output)
     s = annotate_file(args.input, args.output, options, preview=args.preview,
                       progress=args.progress)
     if s["n_nonfinite"]:

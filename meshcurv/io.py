@@ -258,15 +258,16 @@ def read_las(path):
     """Read a LAS/LAZ point cloud (laspy; LAZ through lazrs) into memory, in file order.
 
     ``vertices`` are the scaled x, y, z (model units); ``normals`` come from NormalX..NormalZ
-    (or nx.., normal_x..) extra dimensions when the file has them. Clouds larger than memory
+    (or nx.., normal_x..) extra dimensions when the file has them; ``fields`` holds the
+    :data:`CURVATURE_FIELDS` extra dimensions of an annotated file. Clouds larger than memory
     go through :func:`meshcurv.tiled.annotate_tiled` instead.
     """
     las = _las_module(path)
     try:
-        xyz, normals = las.read_las_points(path)
+        xyz, normals, fields = las.read_las_cloud(path, fields=CURVATURE_FIELDS)
     except las.LasReadError as exc:  # its message already names the file
         raise MeshFileError(first_line(exc)) from exc
-    return MeshData(vertices=xyz, normals=normals, path=path)
+    return MeshData(vertices=xyz, normals=normals, fields=fields, path=path)
 
 
 READERS = {".ply": read_ply, ".obj": read_trimesh, ".off": read_trimesh, ".stl": read_trimesh,

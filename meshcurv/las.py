@@ -21,7 +21,10 @@ NormalX..NormalZ      float64  the unit normal used, only when it was estimated
 
 Writes are atomic: the output goes to a temporary file in the output's folder and is renamed
 over ``out_path`` only when complete, so a failure never leaves a partial file. The input is
-never overwritten.
+never overwritten. The output has the input's LAS version, except for LAS 1.0, which laspy
+cannot write: its files are written as LAS 1.2, which has the same header layout and every 1.0
+point format (see :func:`output_version`). The extra-bytes VLR that names the added dimensions
+is written whatever the version, as laspy does.
 
 >>> pts, nrm = read_las_points("scan.laz")                                # doctest: +SKIP
 >>> res = meshcurv.principal_curvatures(pts, radius=0.5, orientation=(0, 0, 100))  # doctest: +SKIP
@@ -36,8 +39,8 @@ import numpy as np
 from .io import CURVATURE_FIELDS, atomic_write, check_distinct, curvature_fields
 
 __all__ = ["LasReadError", "CURVATURE_FIELDS", "NORMAL_FIELDS", "las_point_count",
-           "iter_las_chunks", "read_las_points", "result_fields", "annotate_las",
-           "write_las_curvature"]
+           "iter_las_chunks", "read_las_points", "read_las_cloud", "result_fields",
+           "output_version", "check_annotatable", "annotate_las", "write_las_curvature"]
 
 
 NORMAL_FIELDS = ("NormalX", "NormalY", "NormalZ")
@@ -81,6 +84,50 @@ def _normal_dims(point_format):
         if all(c in names for c in cand):
             return tuple(names[c] for c in cand)
     return None
+
+
+def output_version(path_or_header):
+    """``(input version, output version)`` of an annotated copy of a LAS/LAZ file, as "1.2" ...
+
+    The output keeps the input's version when laspy can write it; otherwise (LAS 1.0) it is
+    LAS 1.2, the version laspy prefers for point formats 0-3: the same header layout and the
+    same point records (1.4 for other formats).
+    """
+    import laspy
+
+    header = path_or_header
+    if not isinstance(header, laspy.LasHeader):
+        with _open(path_or_header) as reader:
+            header = reader.header
+    version = str(header.version)
+    if version in laspy.supported_versions():
+        return version, version
+    return version, "1.2" if header.point_format.id <= 3 else "1.4"
+
+
+def _check_new_dims(path, point_format, names):
+    existing = {d.lower() for d in point_format.dimension_names}
+    clash = [n for n in names if n.lower() in existing]
+    if clash:
+        listed = ", ".join(clash[:3]) + (f" and {len(clash) - 3} more" if len(clash) > 3 else "")
+        raise ValueError(f"{path} already has dimension(s) {listed} (an annotated file?); "
+                         "annotate the original file")
+
+
+def check_annotatable(path, normals=None):
+    """The dimensions :func:`write_las_curvature` would add to ``path``; checked before any work.
+
+    ``normals`` as in :func:`write_las_curvature` (None: NormalX..NormalZ when the file has no
+    normals). Raises ValueError when the file already has one of them (an annotated file),
+    :class:`LasReadError` when it cannot be read.
+    """
+    with _open(path) as reader:
+        point_format = reader.header.point_format
+    if normals is None:
+        normals = _normal_dims(point_format) is None
+    names = list(CURVATURE_FIELDS) + (list(NORMAL_FIELDS) if normals else [])
+    _check_new_dims(path, point_format, names)
+    return names
 
 
 def las_point_count(path):
@@ -152,13 +199,33 @@ def read_las_points(path, chunk_size=DEFAULT_CHUNK):
     xyz : (n, 3) float64, model units, file order
     normals : (n, 3) float64 or None, when the file has normal dimensions
     """
-    xyz, nv = [], []
-    for _, p, n in iter_las_chunks(path, chunk_size):
+    xyz, nv, _ = read_las_cloud(path, chunk_size, fields=())
+    return xyz, nv
+
+
+def read_las_cloud(path, chunk_size=DEFAULT_CHUNK, fields=CURVATURE_FIELDS):
+    """All points of a LAS/LAZ file in memory, with the extra dimensions named in ``fields``.
+
+    Returns
+    -------
+    xyz : (n, 3) float64, model units, file order
+    normals : (n, 3) float64 or None, when the file has normal dimensions
+    found : dict name -> (n,) array, the dimensions of ``fields`` the file has (e.g. the
+        curvature fields of an annotated file), in their stored type
+    """
+    with _open(path) as reader:
+        have = {n.lower(): n for n in reader.header.point_format.extra_dimension_names}
+    wanted = {f: have[f.lower()] for f in fields if f.lower() in have}
+    xyz, nv, found = [], [], {f: [] for f in wanted}
+    for _, p, n, rec in iter_las_chunks(path, chunk_size, with_records=True):
         xyz.append(p)
         nv.append(n)
+        for f, dim in wanted.items():
+            found[f].append(np.asarray(rec[dim]))
     if not xyz:
-        return np.zeros((0, 3)), None
-    return np.concatenate(xyz), (None if nv[0] is None else np.concatenate(nv))
+        return np.zeros((0, 3)), None, {}
+    return (np.concatenate(xyz), (None if nv[0] is None else np.concatenate(nv)),
+            {f: np.concatenate(v) for f, v in found.items()})
 
 
 def result_fields(result, normals=False, float_type="f8"):
@@ -196,6 +263,9 @@ def annotate_las(in_path, out_path, fields_for, names, chunk_size=DEFAULT_CHUNK,
     chunk_size : int, points per chunk (bounds the memory)
     float_type : numpy float dtype of the float fields ("f8" or "f4")
 
+    The output has the input's LAS version, or LAS 1.2 for a LAS 1.0 input (see
+    :func:`output_version`).
+
     Raises
     ------
     ValueError
@@ -209,10 +279,10 @@ def annotate_las(in_path, out_path, fields_for, names, chunk_size=DEFAULT_CHUNK,
     _check_paths(in_path, out_path)
     with _open(in_path) as reader:
         header = copy.deepcopy(reader.header)
-    existing = {d.lower() for d in header.point_format.dimension_names}
-    clash = [n for n in names if n.lower() in existing]
-    if clash:
-        raise ValueError(f"{in_path} already has dimension(s) {clash}; annotate the original file")
+    _check_new_dims(in_path, header.point_format, names)
+    version = output_version(header)[1]
+    if version != str(header.version):  # LAS 1.0: laspy writes 1.1 and later only
+        header.version = laspy.header.Version.from_str(version)
     header.add_extra_dims([
         laspy.ExtraBytesParams(name=n, type=t, description=_DESCRIPTIONS.get(n, ""))
         for n, t in _field_types(names, float_type)])
@@ -243,14 +313,12 @@ def write_las_curvature(in_path, out_path, result, normals=None, chunk_size=DEFA
     result : CurvatureResult with one row per point of ``in_path``, in file order
     normals : bool, write NormalX..NormalZ (default: when the input has no normals)
     """
-    with _open(in_path) as reader:
-        total = int(reader.header.point_count)
-        has_normals = _normal_dims(reader.header.point_format) is not None
+    _check_paths(in_path, out_path)
+    total = las_point_count(in_path)
     if len(result) != total:
         raise ValueError(f"result has {len(result)} rows, {in_path} has {total} points")
-    if normals is None:
-        normals = not has_normals
+    names = check_annotatable(in_path, normals)
+    normals = NORMAL_FIELDS[0] in names
     fields = result_fields(result, normals=normals, float_type=float_type)
-    names = list(CURVATURE_FIELDS) + (list(NORMAL_FIELDS) if normals else [])
     annotate_las(in_path, out_path, lambda a, k: {n: fields[n][a:a + k] for n in names}, names,
                  chunk_size=chunk_size, float_type=float_type)

@@ -6,7 +6,11 @@ PCA-normal radius) of the tile, in input order, and estimates curvature at its o
 (``principal_curvatures(..., query=own)``). The neighbour lists of the own points then hold the
 same points as in a whole-cloud run, so a tile's values are those of the untiled run with the
 same normals - bit for bit as long as the neighbour search lists each ball in an order that does
-not depend on far-away points (e.g. on where the bounding box of the cloud starts).
+not depend on far-away points (e.g. on where the bounding box of the cloud starts). The grid's
+cell walls lie on multiples of the cell size, but a point exactly on a wall (z = 0 in a quantized
+LAS file) is binned by the rounding of its offset from the grid's first cell, which depends on
+the points present; its neighbours may then be summed in another order, and its values differ
+by rounding (measured: up to 1e-14 in curvature, 1e-12 in the directions).
 
 Pipeline, every stage resumable from a work folder (``OUT.meshcurv-work`` next to the output):
 
@@ -51,6 +55,7 @@ Normal orientation across tiles
 
 import contextlib
 import json
+import logging
 import os
 import shutil
 import tempfile
@@ -572,9 +577,77 @@ def _dask_client(scheduler, n_workers, threads_per_task=None):
             yield client, threads_per_task
         return
     n_workers = int(n_workers or min(os.cpu_count() or 1, 8))
-    with LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
-                      dashboard_address=None) as cluster, Client(cluster) as client:
-        yield client, threads_per_task or max(1, (os.cpu_count() or 1) // n_workers)
+    cluster = None
+    try:
+        with _workers_ignore_sigint():
+            cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
+                                   dashboard_address=None)
+        with Client(cluster) as client:
+            client.run(_quiet_worker)
+            yield client, threads_per_task or max(1, (os.cpu_count() or 1) // n_workers)
+    except BaseException:
+        # interrupted or failed: the caller reports it in one line; the scheduler and nannies
+        # in this process would add warnings about the workers they stop
+        _set_distributed_log_level(logging.CRITICAL)
+        raise
+    finally:
+        if cluster is not None:
+            try:
+                cluster.close()
+            finally:
+                _set_distributed_log_level(None)
+
+
+@contextlib.contextmanager
+def _workers_ignore_sigint():
+    """Ignore SIGINT in this process while a LocalCluster starts its worker processes.
+
+    The workers inherit the ignored signal, so a Ctrl-C in the terminal (sent to the whole
+    process group) reaches only the driver, which closes the cluster and reports one line,
+    instead of every worker printing a KeyboardInterrupt traceback. A Ctrl-C during these
+    seconds of start-up is lost; workers restarted later get it again (see _quiet_worker).
+    """
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
+
+
+def _quiet_worker():
+    """Run in each worker process of our LocalCluster: the driver reports a failed task in one
+    line (tile and reason), so the worker's own log of it (a multi-line "Compute Failed" block)
+    and its warnings while the cluster shuts down are not printed. A Ctrl-C is for the driver."""
+    import signal
+    import threading
+
+    for name in ("distributed", "distributed.worker"):
+        logging.getLogger(name).setLevel(logging.CRITICAL)
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+_SAVED_LOG_LEVELS = {}
+
+
+def _set_distributed_log_level(level):
+    """Set the level of distributed's loggers in this process; None restores them."""
+    names = ("distributed", "distributed.scheduler", "distributed.nanny", "distributed.worker",
+             "distributed.core", "distributed.client", "distributed.deploy.spec")
+    for name in names:
+        logger = logging.getLogger(name)
+        if level is None:
+            if name in _SAVED_LOG_LEVELS:
+                logger.setLevel(_SAVED_LOG_LEVELS.pop(name))
+        else:
+            _SAVED_LOG_LEVELS.setdefault(name, logger.level)
+            logger.setLevel(level)
 
 
 def _run(client, jobs, desc, unit, in_path, progress):
@@ -737,6 +810,9 @@ def annotate_tiled(in_path, out_path, radius=None, tile_size=None, *, orientatio
 
     Raises
     ------
+    ValueError
+        Bad arguments, or an input that already has curvature dimensions (an annotated file);
+        raised before any work.
     LasReadError
         Unreadable or truncated input; names the file and the points. No output is written.
     TileError
@@ -755,6 +831,8 @@ def annotate_tiled(in_path, out_path, radius=None, tile_size=None, *, orientatio
     chunk_size = int(chunk_size)
     if chunk_size < 1:
         raise ValueError(f"chunk_size must be a positive number of points, got {chunk_size}")
+    # an annotated input is refused now, not after the whole computation
+    names = las.check_annotatable(in_path)
     with las._open(in_path) as reader:
         header = reader.header
         n_points = int(header.point_count)
@@ -800,7 +878,6 @@ def annotate_tiled(in_path, out_path, radius=None, tile_size=None, *, orientatio
             shutil.rmtree(work, ignore_errors=True)
             raise
     write_normals = not has_normals
-    names = list(las.CURVATURE_FIELDS) + (list(las.NORMAL_FIELDS) if write_normals else [])
     kept = []
 
     def fields_for(first, count):
@@ -839,7 +916,7 @@ def principal_curvatures_tiled(vertices, radius, tile_size, normals=None, *, ori
     The driver cuts the cloud into tile + halo pieces in a work folder (which workers must see);
     each task loads one tile + halo only. With given normals or a viewpoint ``orientation`` the
     result equals ``principal_curvatures(vertices, normals=..., radius=radius, orientation=...)``
-    bit for bit.
+    to rounding (bit for bit but at points exactly on a neighbour-grid wall; module docstring).
 
     Parameters
     ----------

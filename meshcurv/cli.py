@@ -411,12 +411,18 @@ def _batch_loop(todo, results, out_dir, progress, run):
         results[k] = res
         bar.update(1)
         if res["status"] == "failed":
-            bar.write(f"failed: {res['error']}", file=sys.stderr)
+            bar.write(f"failed: {_failure_text(res)}", file=sys.stderr)
 
     try:
         run(record)
     finally:
         bar.close()
+
+
+def _failure_text(res):
+    """``<input>: <reason>`` of a failed file (most reasons already start with the file)."""
+    error = res["error"]
+    return error if error.startswith(res["input"]) else f"{res['input']}: {error}"
 
 
 def _worker_failure(k, inputs, outputs, exc):
@@ -721,9 +727,7 @@ def _cmd_batch(args):
           f"exists), {counts['failed']} failed, in {args.out_dir}")
     for r in results:
         if r["status"] == "failed":
-            named = r["error"].startswith(r["input"])  # most messages start with the file
-            print(f"  FAILED {r['error'] if named else r['input'] + ': ' + r['error']}",
-                  file=sys.stderr)
+            print(f"  FAILED {_failure_text(r)}", file=sys.stderr)
     return 1 if counts["failed"] else 0
 
 

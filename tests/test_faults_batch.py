@@ -68,8 +68,8 @@ def run_cli(*argv, crash=False, **popen):
             cli._run_one = test_faults_batch.crashing_run_one
         sys.exit(cli.main(sys.argv[1:]))
         """)
-    return subprocess.Popen([sys.executable, "-c", code, *map(str, argv)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **popen)
+    popen = {"stdout": subprocess.PIPE, "stderr": subprocess.PIPE, **popen}
+    return subprocess.Popen([sys.executable, "-c", code, *map(str, argv)], text=True, **popen)
 
 
 def finish(proc, timeout=240):
@@ -257,7 +257,7 @@ def _alive(pids):
 def _wait_for_workers(proc, n, timeout=60):
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
-        assert proc.poll() is None, proc.communicate()
+        assert proc.poll() is None, "the batch ended before its workers were seen"
         workers = _descendants(proc.pid)
         if len(workers) >= n:
             return workers
@@ -287,15 +287,16 @@ def _kill_leftovers(pids):
 
 @pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="needs /proc")
 def test_workers_die_with_a_killed_parallel_batch(tmp_path, busy_dir):
+    # no pipes: orphans would hold them open
     proc = run_cli("batch", busy_dir, "-O", tmp_path / "out", "--jobs", 2,
-                   start_new_session=True)
+                   start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     workers = set()
     try:
         workers = _wait_for_workers(proc, 2)
         time.sleep(2.0)  # the workers are computing now
         workers |= _descendants(proc.pid)
         os.kill(proc.pid, signal.SIGKILL)
-        proc.communicate()
+        proc.wait()
         deadline = time.monotonic() + 5
         while _alive(workers) and time.monotonic() < deadline:
             time.sleep(0.1)

@@ -435,6 +435,10 @@ def _batch_pool(inputs, outputs, options, todo, record, jobs=1):
     sharing the cores; a file whose worker dies is reported failed with the reason."""
     from .batch import WorkerPool
 
+    if os.name != "posix":  # the worker pipes are POSIX file descriptors: no isolation here
+        for k in todo:
+            record(k, _run_one(inputs[k], outputs[k], options))
+        return
     n_workers = max(1, min(jobs, len(todo)))
     threads = max(1, (os.cpu_count() or 1) // n_workers)
     task = _run_one  # looked up now: the worker imports it by name

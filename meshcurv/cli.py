@@ -261,29 +261,76 @@ def _run_one(input_path, output_path, options):
     return {"input": input_path, "output": output_path, "status": "failed", "error": message}
 
 
-def _init_worker(threads):
-    """Process-pool initializer: share the cores among workers instead of oversubscribing."""
-    try:
-        import numba
-        numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
-    except Exception:
-        pass
-
-
-def _expand_inputs(inputs):
-    """Input paths; a directory contributes its readable files (not recursive), sorted."""
+def _expand_inputs(inputs, out_dir=None):
+    """Input paths, each as ``(path, from_folder)``; a directory contributes its readable files
+    (not recursive), sorted. In a directory that is ``out_dir`` itself, files named like batch
+    outputs (``*_curvature.ply``) are left out: they are outputs of an earlier run."""
     out = []
     for p in inputs:
         if os.path.isdir(p):
-            out.extend(sorted(os.path.join(p, f) for f in os.listdir(p)
-                              if io._extension(f) in io.READERS
-                              and os.path.isfile(os.path.join(p, f))))
+            is_out_dir = out_dir is not None and os.path.isdir(out_dir) \
+                and os.path.samefile(p, out_dir)
+            out.extend((os.path.join(p, f), True) for f in sorted(os.listdir(p))
+                       if io._extension(f) in io.READERS
+                       and os.path.isfile(os.path.join(p, f))
+                       and not (is_out_dir and f.lower().endswith(_OUTPUT_SUFFIX + ".ply")))
         else:
-            out.append(p)
+            out.append((p, False))
     return out
 
 
-def output_path_for(input_path, out_dir, suffix="_curvature", extension=".ply"):
+def _file_id(path):
+    """``(device, inode)`` of an existing file (hard links and symlinks share it), else None."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return st.st_dev, st.st_ino
+
+
+def _batch_plan(inputs, out_dir):
+    """``(inputs, outputs)`` of a batch, absolute paths, in order.
+
+    Outputs are never inputs: a file found in an input folder that is the output of another
+    input of this run (same path after resolving symlinks, or the same file) is left out, and a
+    run in which an output would be one of its inputs (named on the command line, or reached
+    through a link) is refused with CommandError (exit 2) before anything is written.
+    """
+    listed = [(os.path.abspath(p), from_folder)
+              for p, from_folder in _expand_inputs(inputs, out_dir)]
+    targets = [output_path_for(p, out_dir) for p, _ in listed]
+    target_names = {os.path.realpath(o) for o in targets}
+    target_ids = {i for i in map(_file_id, targets) if i is not None}
+
+    def is_output(path):
+        return os.path.realpath(path) in target_names or _file_id(path) in target_ids
+
+    kept = [p for p, from_folder in listed if not (from_folder and is_output(p))]
+    if not kept:
+        raise CommandError(f"no input files in {' '.join(map(str, inputs))} (readable: "
+                           f"{', '.join(sorted(io.READERS))}; outputs of this run are not "
+                           "inputs)", 2)
+    outputs = [output_path_for(p, out_dir) for p in kept]
+    seen = {}
+    for i, o in zip(kept, outputs):
+        if o in seen:
+            raise CommandError(f"{i} and {seen[o]} would both write {o}; rename one", 2)
+        seen[o] = i
+    input_names = {os.path.realpath(p): p for p in kept}
+    input_ids = {_file_id(p): p for p in kept}
+    input_ids.pop(None, None)
+    for i, o in zip(kept, outputs):
+        other = input_names.get(os.path.realpath(o)) or input_ids.get(_file_id(o))
+        if other is not None:
+            raise CommandError(f"{other} is both an input and the output of {i}; leave it "
+                               "out or choose another --out-dir", 2)
+    return kept, outputs
+
+
+_OUTPUT_SUFFIX = "_curvature"
+
+
+def output_path_for(input_path, out_dir, suffix=_OUTPUT_SUFFIX, extension=".ply"):
     """``out_dir/<stem><suffix>.ply`` for an input file."""
     stem = os.path.splitext(os.path.basename(input_path))[0]
     return os.path.join(out_dir, stem + suffix + extension)
@@ -304,28 +351,30 @@ def dask_client(scheduler):
         yield client
 
 
+class BatchInterrupted(KeyboardInterrupt):
+    """Ctrl-C stopped a batch: ``done`` of ``total`` files have their output (workers stopped)."""
+
+    def __init__(self, done, total):
+        super().__init__(f"{done} of {total} files done")
+        self.done, self.total = done, total
+
+
 def run_batch(inputs, out_dir, options=AnnotateOptions(), jobs=1, overwrite=False,
               scheduler=None, progress=None):
     """Annotate many files; returns a list of per-file result dicts, in input order.
 
     Each dict has ``input, output, status`` ("ok", "skipped" or "failed") and, for failures,
     ``error``. Outputs that exist are skipped unless ``overwrite`` (writes are atomic, so an
-    existing output is complete). ``jobs > 1`` uses that many processes; ``scheduler`` (a Dask
-    scheduler address or a ``distributed.Client``) runs the files on a Dask cluster whose
-    workers see the same paths: only paths and options travel, never mesh data.
+    existing output is complete). Every file runs in a worker process (``jobs`` of them, reused
+    from file to file): a file that crashes its process (segmentation fault, out of memory) is
+    that file's failure, ``error`` "crashed (signal 11, SIGSEGV)", and the others complete.
+    ``scheduler`` (a Dask scheduler address or a ``distributed.Client``) runs the files on a
+    Dask cluster whose workers see the same paths: only paths and options travel, never mesh
+    data. Outputs are never taken as inputs and never overwrite one (see :func:`_batch_plan`).
+    Ctrl-C raises :class:`BatchInterrupted` once the workers are stopped.
     """
-    expanded = [os.path.abspath(p) for p in _expand_inputs(inputs)]
-    if not expanded:
-        raise CommandError(f"no input files in {' '.join(map(str, inputs))} (readable: "
-                           f"{', '.join(sorted(io.READERS))})", 2)
-    inputs = expanded
     out_dir = os.path.abspath(out_dir)
-    outputs = [output_path_for(p, out_dir) for p in inputs]
-    seen = {}
-    for i, o in zip(inputs, outputs):
-        if o in seen:
-            raise CommandError(f"{i} and {seen[o]} would both write {o}; rename one", 2)
-        seen[o] = i
+    inputs, outputs = _batch_plan(inputs, out_dir)
     results = [None] * len(inputs)
     todo = []
     for k, (i, o) in enumerate(zip(inputs, outputs)):
@@ -333,14 +382,19 @@ def run_batch(inputs, out_dir, options=AnnotateOptions(), jobs=1, overwrite=Fals
             results[k] = {"input": i, "output": o, "status": "skipped"}
         else:
             todo.append(k)
-    if scheduler is not None and todo:
-        with dask_client(scheduler) as client:  # connect before creating anything
+    # temporary files of writes killed in an earlier run (outputs that exist are not rewritten)
+    io._remove_stale_partials(out_dir, [os.path.basename(o) for o in outputs])
+    try:
+        if scheduler is not None and todo:
+            with dask_client(scheduler) as client:  # connect before creating anything
+                _batch_loop(todo, results, out_dir, progress, functools.partial(
+                    _batch_dask, client, inputs, outputs, options, todo))
+        elif todo:
             _batch_loop(todo, results, out_dir, progress, functools.partial(
-                _batch_dask, client, inputs, outputs, options, todo))
-        return results
-    runner = _batch_pool if jobs > 1 and len(todo) > 1 else _batch_serial
-    _batch_loop(todo, results, out_dir, progress, functools.partial(
-        runner, inputs, outputs, options, todo, jobs=jobs))
+                _batch_pool, inputs, outputs, options, todo, jobs=jobs))
+    except KeyboardInterrupt:
+        done = sum(r is not None and r["status"] in ("ok", "skipped") for r in results)
+        raise BatchInterrupted(done, len(inputs)) from None
     return results
 
 
@@ -357,7 +411,7 @@ def _batch_loop(todo, results, out_dir, progress, run):
         results[k] = res
         bar.update(1)
         if res["status"] == "failed":
-            bar.write(f"failed: {res['error']}", file=sys.stderr)
+            bar.write(f"failed: {_failure_text(res)}", file=sys.stderr)
 
     try:
         run(record)
@@ -365,10 +419,10 @@ def _batch_loop(todo, results, out_dir, progress, run):
         bar.close()
 
 
-def _batch_serial(inputs, outputs, options, todo, record, jobs=1):
-    """The pending files one after the other, in this process."""
-    for k in todo:
-        record(k, _run_one(inputs[k], outputs[k], options))
+def _failure_text(res):
+    """``<input>: <reason>`` of a failed file (most reasons already start with the file)."""
+    error = res["error"]
+    return error if error.startswith(res["input"]) else f"{res['input']}: {error}"
 
 
 def _worker_failure(k, inputs, outputs, exc):
@@ -376,22 +430,24 @@ def _worker_failure(k, inputs, outputs, exc):
             "error": f"worker failed: {type(exc).__name__}: {io.first_line(exc)}"}
 
 
-def _batch_pool(inputs, outputs, options, todo, record, jobs=2):
-    """The pending files on a local process pool (spawned: numba and OpenMP are not fork-safe)."""
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+def _batch_pool(inputs, outputs, options, todo, record, jobs=1):
+    """The pending files on ``jobs`` crash-isolated worker processes (one for a serial run),
+    sharing the cores; a file whose worker dies is reported failed with the reason."""
+    from .batch import WorkerPool
 
-    threads = max(1, (os.cpu_count() or 1) // jobs)
-    with ProcessPoolExecutor(max_workers=min(jobs, len(todo)),
-                             mp_context=multiprocessing.get_context("spawn"),
-                             initializer=_init_worker, initargs=(threads,)) as pool:
-        futures = {pool.submit(_run_one, inputs[k], outputs[k], options): k for k in todo}
-        for fut in as_completed(futures):
-            k = futures[fut]
-            try:
-                res = fut.result()
-            except Exception as exc:  # the worker died (e.g. out of memory)
-                res = _worker_failure(k, inputs, outputs, exc)
+    if os.name != "posix":  # the worker pipes are POSIX file descriptors: no isolation here
+        for k in todo:
+            record(k, _run_one(inputs[k], outputs[k], options))
+        return
+    n_workers = max(1, min(jobs, len(todo)))
+    threads = max(1, (os.cpu_count() or 1) // n_workers)
+    task = _run_one  # looked up now: the worker imports it by name
+    with WorkerPool(n_workers, threads) as pool:
+        for k, res, error in pool.run((k, task, (inputs[k], outputs[k], options))
+                                      for k in todo):
+            if error is not None:
+                res = {"input": inputs[k], "output": outputs[k], "status": "failed",
+                       "error": error}
             record(k, res)
 
 
@@ -551,7 +607,11 @@ def build_parser():
         "batch", help="annotate many files (resumable, parallel, optionally on Dask)",
         description=_DESCRIPTION + "\n\nWrites OUT_DIR/<name>_curvature.ply per input; files "
         "whose output exists are skipped (re-run to resume); a failing file is reported and "
-        "the batch goes on; the exit code is 1 if any file failed.",
+        "the batch goes on, also when it crashes its process (each file runs in a worker "
+        "process, one per job); the exit code is 1 if any file failed.\n\nOutputs are never "
+        "inputs: a file in an input folder that is the output of another input of the run is "
+        "skipped, and so is every *_curvature.ply when the input folder is OUT_DIR itself; a "
+        "run in which an output would replace one of its inputs is refused.",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("inputs", nargs="+", help="input files or directories (their readable files)")
     p.add_argument("--out-dir", "-O", required=True, help="directory for the annotated PLYs")
@@ -680,16 +740,19 @@ def _cmd_batch(args):
     _check_options(options)
     if args.jobs < 1:
         raise CommandError("--jobs must be at least 1", 2)
-    results = run_batch(args.inputs, args.out_dir, options, jobs=args.jobs,
-                        overwrite=args.overwrite, scheduler=args.dask_scheduler)
+    try:
+        results = run_batch(args.inputs, args.out_dir, options, jobs=args.jobs,
+                            overwrite=args.overwrite, scheduler=args.dask_scheduler)
+    except BatchInterrupted as exc:
+        print(f"meshcurv: interrupted; {exc.done} of {exc.total} files done, rerun to resume",
+              file=sys.stderr)
+        return 130
     counts = {s: sum(r["status"] == s for r in results) for s in ("ok", "skipped", "failed")}
     print(f"meshcurv batch: {counts['ok']} annotated, {counts['skipped']} skipped (output "
           f"exists), {counts['failed']} failed, in {args.out_dir}")
     for r in results:
         if r["status"] == "failed":
-            named = r["error"].startswith(r["input"])  # most messages start with the file
-            print(f"  FAILED {r['error'] if named else r['input'] + ': ' + r['error']}",
-                  file=sys.stderr)
+            print(f"  FAILED {_failure_text(r)}", file=sys.stderr)
     return 1 if counts["failed"] else 0
 
 

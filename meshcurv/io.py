@@ -350,8 +350,65 @@ def check_distinct(input_path, output_path):
 _UMASK = os.umask(0)
 os.umask(_UMASK)
 
-# Suffix of the temporary files of :func:`atomic_write` (named ``.<name>.<random>.part``).
+# Suffix of the temporary files of :func:`atomic_write`, named
+# ``.<name>.<host>.<pid>.<random>.part`` so that a later write can tell a stale one (its process
+# on this host is gone) from one a concurrent run is still writing.
 PARTIAL_SUFFIX = ".part"
+_HOST = None
+
+
+def _host_tag():
+    """This host's name as one dot-free token of a temporary file name."""
+    global _HOST
+    if _HOST is None:
+        import re
+        import socket
+
+        _HOST = re.sub(r"[^A-Za-z0-9_-]", "-", socket.gethostname()) or "localhost"
+    return _HOST
+
+
+def _pid_alive(pid):
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # EPERM: alive, another user's
+        return True
+    return True
+
+
+def _remove_stale_partials(directory, names):
+    """Remove the temporary files of :func:`atomic_write` for the targets ``names`` (basenames)
+    in ``directory`` whose writing process, on this host, is no longer alive; returns the paths
+    removed. A live process's file (another run writing the same target) is never touched;
+    files of other hosts (a shared folder) and of other naming schemes are left alone."""
+    if os.name != "posix":  # os.kill(pid, 0) is no liveness test on Windows
+        return []
+    names = set(names)
+    host = _host_tag()
+    removed = []
+    try:
+        entries = os.listdir(directory)
+    except OSError:
+        return []
+    for entry in entries:
+        if not (entry.startswith(".") and entry.endswith(PARTIAL_SUFFIX)):
+            continue
+        parts = entry[1:-len(PARTIAL_SUFFIX)].rsplit(".", 3)
+        if len(parts) != 4 or parts[0] not in names or parts[1] != host \
+                or not parts[2].isdigit():
+            continue
+        pid = int(parts[2])
+        if pid == os.getpid() or _pid_alive(pid):
+            continue
+        path = os.path.join(directory, entry)
+        try:
+            os.remove(path)
+            removed.append(path)
+        except OSError:  # removed by a concurrent run, or not ours to remove
+            pass
+    return removed
 
 
 def atomic_write(path, write_fn):
@@ -359,12 +416,18 @@ def atomic_write(path, write_fn):
 
     Readers never see a partial file: on success the temporary file replaces ``path`` in one
     ``os.replace``; on any failure it is removed and the exception propagates. The folder of
-    ``path`` is created if missing. Safe to call from several threads at once.
+    ``path`` is created if missing. Safe to call from several threads and processes at once.
+
+    The temporary file is ``.<name>.<host>.<pid>.<random>.part``; one left by a killed process
+    (nothing can remove it then) is removed by the next write of the same ``path`` from this
+    host, once no process of that pid is alive.
     """
     path = os.fspath(path)
     directory = os.path.dirname(os.path.abspath(path))
     os.makedirs(directory, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=directory, prefix="." + os.path.basename(path) + ".",
+    name = os.path.basename(path)
+    _remove_stale_partials(directory, [name])
+    fd, tmp = tempfile.mkstemp(dir=directory, prefix=f".{name}.{_host_tag()}.{os.getpid()}.",
                                suffix=PARTIAL_SUFFIX)
     os.close(fd)
     try:

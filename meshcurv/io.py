@@ -28,6 +28,7 @@ import re
 import stat
 import tempfile
 import warnings
+from collections import Counter
 from dataclasses import dataclass, field as dc_field
 
 import numpy as np
@@ -204,7 +205,6 @@ def read_ply(path):
                                  f"the {size - start} bytes of data can hold (truncated file "
                                  f"or corrupt header)")
             room -= need
-        fh.seek(0)
         if text:  # one line per element record; plyfile stops after the declared counts
             data = fh.read().replace(b"\r\n", b"\n").replace(b"\r", b"\n").strip()
             beyond = (data.count(b"\n") + 1 if data else 0) > sum(e[1] for e in elements)
@@ -391,7 +391,7 @@ def _stl_corners(raw):
                                ("attribute", "<u2")])
             tris = np.frombuffer(raw, record, m, 84)["corners"]
             return tris.reshape(-1, 3).astype(np.float64)
-    if raw.lstrip()[:5].lower() != b"solid":
+    if raw.lstrip()[:5].lower() != b"solid" or b"\0" in raw:  # SolidWorks: binary "solid.."
         if len(raw) < 84:
             raise ValueError(f"{len(raw)} bytes: too short for a binary STL, and not ASCII "
                              "(no 'solid' line)")
@@ -399,11 +399,15 @@ def _stl_corners(raw):
                          f"but the file has {len(raw)} bytes (truncated or corrupt)")
     corners = _STL_FACET.findall(raw)
     rest = _STL_FACET.sub(b"\n", raw)
+    words = Counter()
     for line in rest.splitlines():
         word = line.split()[:1]
         if word and word[0].lower() not in (b"solid", b"endsolid"):
             raise ValueError(f"incomplete or malformed ASCII facet near "
                              f"{line.strip()[:40].decode('latin-1')!r}")
+        words.update(w.lower() for w in word)
+    if words[b"solid"] != words[b"endsolid"]:
+        raise ValueError("ASCII file without its 'endsolid' line (truncated)")
     try:
         return np.array(corners, dtype=np.float64).reshape(-1, 3)
     except ValueError:
@@ -458,12 +462,13 @@ def read_xyz(path):
                              "rows follow (truncated file or wrong count)")
     if not lines:
         return MeshData(vertices=np.zeros((0, 3)), path=path)
-    ncol = {len(ln) for ln in lines}
-    if len(ncol) != 1:
-        first = next(k for k, ln in enumerate(lines) if len(ln) != len(lines[0]))
-        raise ValueError(f"rows have different numbers of columns: {sorted(ncol)[:6]} (row "
-                         f"{first + 1} has {len(lines[first])}, the first {len(lines[0])})")
-    ncol = ncol.pop()
+    widths = Counter(len(ln) for ln in lines)
+    if len(widths) != 1:
+        usual = widths.most_common(1)[0][0]
+        odd = next(k for k, ln in enumerate(lines) if len(ln) != usual)
+        raise ValueError(f"rows have different numbers of columns: row {odd + 1} has "
+                         f"{len(lines[odd])}, {widths[usual]} of {len(lines)} rows have {usual}")
+    ncol = len(lines[0])
     if ncol not in (3, 4, 6, 7):
         raise ValueError(f"expected 3 (x y z), 6 (x y z nx ny nz), 4 or 7 (PTS) columns, "
                          f"got {ncol}")
@@ -550,16 +555,16 @@ def _quiet_libraries():
     """Silence warnings and the loggers of the parsing libraries while a file is read: their
     complaints about a corrupt file become the reader's one-line MeshFileError instead."""
     loggers = [logging.getLogger(name) for name in ("trimesh", "plyfile", "laspy")]
-    disabled = [lg.disabled for lg in loggers]
+    levels = [lg.level for lg in loggers]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        for lg in loggers:
-            lg.disabled = True
+        for lg in loggers:  # the level, not ``disabled``: it also holds for child loggers
+            lg.setLevel(logging.CRITICAL + 1)
         try:
             yield
         finally:
-            for lg, was in zip(loggers, disabled):
-                lg.disabled = was
+            for lg, level in zip(loggers, levels):
+                lg.setLevel(level)
 
 
 def read(path):
@@ -611,6 +616,11 @@ def read(path):
     except Exception as exc:  # parsers raise anything on corrupt input
         raise MeshFileError(f"{path}: not a valid {fmt} file "
                             f"({first_line(exc)})") from exc
+    except BaseException as exc:  # a panic of a Rust parser (lazrs) is not an Exception
+        if type(exc).__name__ != "PanicException":
+            raise
+        raise MeshFileError(f"{path}: not a valid {fmt} file (the decoder failed: "
+                            f"{first_line(exc)})") from exc
     data.path = path
     if len(data.vertices) == 0:
         raise MeshFileError(f"{path}: the file holds no vertices")

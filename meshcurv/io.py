@@ -359,8 +359,16 @@ def read_off(path):
         if len(r) < 3:
             raise ValueError(f"vertex {k}: {' '.join(r)!r} is not x y z")
     vertices = _parse_coordinates(vrows, "vertex")
+    frows = rest[nv:]
+    if all(len(r) == 4 and r[0] == "3" for r in frows):  # triangles without colour: at once
+        try:
+            faces = np.array([r[1:] for r in frows], dtype=np.int64).reshape(-1, 3)
+        except ValueError:
+            faces = None
+        if faces is not None and (not faces.size or (faces.min() >= 0 and faces.max() < nv)):
+            return MeshData(vertices=vertices, faces=faces if len(faces) else None, path=path)
     polygons = []
-    for k, r in enumerate(rest[nv:]):
+    for k, r in enumerate(frows):
         try:
             n = int(r[0])
             corners = [int(t) for t in r[1:n + 1]]

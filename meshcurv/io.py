@@ -24,8 +24,15 @@ fields as named extra-bytes dimensions (:mod:`meshcurv.las`). For clouds larger 
 :func:`meshcurv.tiled.annotate_tiled` (``meshcurv annotate --tile-size``).
 """
 
+import contextlib
+import errno
+import logging
 import os
+import re
+import stat
 import tempfile
+import warnings
+from collections import Counter
 from dataclasses import dataclass, field as dc_field
 
 import numpy as np
@@ -130,16 +137,81 @@ def bbox_diagonal(vertices):
 # ---------------------------------------------------------------------------------- readers
 
 def _triangulate(polygons):
-    """Fan-triangulate a list of index polygons; vertices are left untouched."""
+    """Fan-triangulate index polygons (sequences of ints) into an (m, 3) int64 array.
+
+    Polygons with fewer than 3 corners are dropped; vertices are left untouched.
+    """
     tris = []
     for p in polygons:
-        p = np.asarray(p, dtype=np.int64)
-        if len(p) < 3:
+        p = [int(i) for i in p]
+        tris.extend((p[0], p[j], p[j + 1]) for j in range(1, len(p) - 1))
+    return np.array(tris, dtype=np.int64).reshape(-1, 3)
+
+
+def _read_text(path, what):
+    """The file as text (latin-1: never fails on odd bytes in comments); ValueError on NUL
+    bytes, which no text format holds."""
+    with open(path, "rb") as fh:
+        raw = fh.read()
+    nul = raw.find(b"\0")
+    if nul >= 0:
+        raise ValueError(f"binary data where {what} text was expected (byte {nul} is NUL)")
+    return raw.decode("latin-1")
+
+
+def _parse_coordinates(rows, what):
+    """(n, 3) float64 from the first three number strings of each row; ValueError naming the
+    first row that does not parse."""
+    try:
+        return np.array([r[:3] for r in rows], dtype=np.float64).reshape(-1, 3)
+    except ValueError:
+        for k, r in enumerate(rows):
+            try:
+                [float(t) for t in r[:3]]
+            except ValueError:
+                raise ValueError(f"{what} {k + 1}: {' '.join(r[:3])!r} is not three "
+                                 f"numbers") from None
+        raise
+
+
+# Bytes of one value of each PLY scalar type (binary encoding).
+_PLY_SIZES = {"char": 1, "int8": 1, "uchar": 1, "uint8": 1, "short": 2, "int16": 2,
+              "ushort": 2, "uint16": 2, "int": 4, "int32": 4, "uint": 4, "uint32": 4,
+              "float": 4, "float32": 4, "double": 8, "float64": 8}
+
+
+def _ply_header(fh):
+    """Scan a PLY header: (text, [(element, count, smallest record in bytes)]), the file left
+    at the first data byte. Only what bounds the data is checked here; plyfile checks the rest.
+    """
+    if fh.readline().strip() != b"ply":
+        raise ValueError("no 'ply' line at the start: not a PLY file")
+    text, elements = True, []
+    while True:
+        line = fh.readline()
+        if not line:
+            raise ValueError("the header has no 'end_header' line")
+        words = line.split()
+        if not words:
             continue
-        tris.append(np.column_stack([np.full(len(p) - 2, p[0]), p[1:-1], p[2:]]))
-    if not tris:
-        return np.zeros((0, 3), dtype=np.int64)
-    return np.concatenate(tris)
+        if words[0] == b"end_header":
+            return text, elements
+        if words[0] == b"format" and len(words) > 1:
+            text = words[1] == b"ascii"
+        elif words[0] == b"element" and len(words) == 3:
+            try:
+                count = int(words[2])
+            except ValueError:
+                raise ValueError(f"element {words[1].decode('latin-1')!r} has the count "
+                                 f"{words[2].decode('latin-1')!r}, not an integer") from None
+            if count < 0:
+                raise ValueError(f"element {words[1].decode('latin-1')!r} has a negative "
+                                 f"count ({count})")
+            elements.append([words[1].decode("latin-1"), count, 0])
+        elif words[0] == b"property" and elements and len(words) >= 3:
+            # a list costs at least its length field; ASCII at least one digit and a separator
+            size = _PLY_SIZES.get(words[2 if words[1] == b"list" else 1].decode("latin-1"), 1)
+            elements[-1][2] += 2 if text else size
 
 
 def read_ply(path):
@@ -149,10 +221,34 @@ def read_ply(path):
     polygons are fan-triangulated. ``nx ny nz`` become ``normals``; every other vertex property
     except ``x y z`` and colour goes to ``fields`` unchanged (same dtype), the annotated fields
     under their own names (``scalar_k1`` as ``k1``, see :func:`ply_field_names`).
+
+    Element counts must match the data: a file too short for the counts of its header, or
+    with data beyond them, is refused before anything is allocated for it.
     """
     from plyfile import PlyData
 
-    ply = PlyData.read(path)
+    size = os.path.getsize(path)
+    with open(path, "rb") as fh:
+        text, elements = _ply_header(fh)
+        start = fh.tell()
+        room = size - start
+        for name, count, record in elements:
+            need = count * record
+            if need > room:
+                raise ValueError(f"the header declares {count} {name!r} elements, more than "
+                                 f"the {size - start} bytes of data can hold (truncated file "
+                                 f"or corrupt header)")
+            room -= need
+        if text:  # one line per element record; plyfile stops after the declared counts
+            data = fh.read().replace(b"\r\n", b"\n").replace(b"\r", b"\n").strip()
+            beyond = (data.count(b"\n") + 1 if data else 0) > sum(e[1] for e in elements)
+        fh.seek(0)
+        ply = PlyData.read(fh)
+        if not text:  # plyfile leaves a binary file at the end of the declared data
+            beyond = bool(fh.read().strip())
+        if beyond:
+            raise ValueError("data beyond the element counts of the header (corrupt header "
+                             "or a concatenated file)")
     names = [e.name for e in ply.elements]
     if "vertex" not in names:
         raise ValueError("no 'vertex' element")
@@ -166,19 +262,30 @@ def read_ply(path):
         normals = np.column_stack([np.asarray(vert[c], dtype=np.float64)
                                    for c in ("nx", "ny", "nz")])
     field_names = ply_field_names(props)
-    fields = {field_names[p]: np.asarray(vert[p]) for p in props
+    # copies: the file is memory-mapped and closed now
+    fields = {field_names[p]: np.array(vert[p]) for p in props
               if p not in _GEOMETRY and p not in _COLOR}
+    if any(f.dtype == object for f in fields.values()):
+        fields = {p: f for p, f in fields.items() if f.dtype != object}  # list properties
     faces = None
     if "face" in names:
         fdata = ply["face"].data
-        key = next((k for k in ("vertex_indices", "vertex_index") if k in fdata.dtype.names), None)
+        key = next((k for k in ("vertex_indices", "vertex_index")
+                    if k in (fdata.dtype.names or ())), None)
         if key is not None and len(fdata):
             col = fdata[key]
             if col.dtype != object and col.ndim == 2 and col.shape[1] == 3:
-                faces = np.asarray(col, dtype=np.int64)
+                raw = np.asarray(col)
+            elif col.dtype == object and {len(p) for p in col} == {3}:
+                raw = np.stack(col)
             else:
-                lens = {len(p) for p in col}
-                faces = (np.stack(col).astype(np.int64) if lens == {3} else _triangulate(col))
+                raw = None
+                faces = _triangulate(col)
+            if raw is not None:
+                if raw.dtype.kind == "f" and not (np.isfinite(raw).all()
+                                                  and (raw == np.round(raw)).all()):
+                    raise ValueError("face indices that are not integers")
+                faces = raw.astype(np.int64)
             if faces.size and (faces.min() < 0 or faces.max() >= len(vertices)):
                 raise ValueError(f"face indices outside 0..{len(vertices) - 1}")
     return MeshData(vertices=vertices, faces=faces, normals=normals, fields=fields, path=path)
@@ -193,40 +300,219 @@ def _merge_exact(vertices, faces):
     return vertices[first[order]], rank[inverse.ravel()][faces]
 
 
-def read_trimesh(path):
-    """Read OBJ, OFF or STL through trimesh, in file order (``process=False``).
+def read_obj(path):
+    """Read a Wavefront OBJ mesh: one row per ``v`` line, in file order.
 
-    Normals are not taken from these files: the estimator's own are used. STL corners are
-    merged by exact position (see the module docstring).
+    Faces (``f``) may use ``v``, ``v/vt``, ``v//vn`` or ``v/vt/vn`` corners and negative
+    (relative) indices; polygons are fan-triangulated. Texture coordinates and normals are
+    ignored, so vertices are never split by them (unlike trimesh's loader); lines, points,
+    groups and materials are ignored too.
     """
-    import trimesh
-
-    mesh = trimesh.load(path, process=False, maintain_order=True, force="mesh")
-    vertices = np.asarray(mesh.vertices, dtype=np.float64)
-    faces = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
-    if path.lower().endswith(".stl") and len(vertices):
-        vertices, faces = _merge_exact(vertices, faces)
+    text = _read_text(path, "OBJ").replace("\\\r\n", " ").replace("\\\n", " ")
+    rows, polygons = [], []
+    for lineno, line in enumerate(text.splitlines(), 1):
+        if "#" in line:
+            line = line.split("#", 1)[0]
+        parts = line.split()
+        if not parts:
+            continue
+        if parts[0] == "v":
+            if len(parts) < 4:
+                raise ValueError(f"line {lineno}: a vertex needs x y z")
+            rows.append(parts[1:4])
+        elif parts[0] == "f":
+            corners = []
+            for token in parts[1:]:
+                try:
+                    i = int(token.split("/", 1)[0])
+                except ValueError:
+                    raise ValueError(f"line {lineno}: {token!r} is not a vertex index") from None
+                if i == 0:
+                    raise ValueError(f"line {lineno}: vertex index 0 (OBJ counts from 1)")
+                if i < 0:  # relative to the vertices read so far
+                    if -i > len(rows):
+                        raise ValueError(f"line {lineno}: relative index {i} but only "
+                                         f"{len(rows)} vertices before it")
+                    i += len(rows) + 1
+                corners.append(i - 1)
+            polygons.append(corners)
+    vertices = _parse_coordinates(rows, "vertex")
+    if all(len(p) == 3 for p in polygons):
+        faces = np.array(polygons, dtype=np.int64).reshape(-1, 3)
+    else:
+        faces = _triangulate(polygons)
+    if faces.size and faces.max() >= len(vertices):
+        raise ValueError(f"a face uses vertex {faces.max() + 1} of {len(vertices)}")
     return MeshData(vertices=vertices, faces=faces if len(faces) else None, path=path)
+
+
+_OFF_KEYWORD = re.compile(r"(ST)?C?N?(4)?(n)?OFF")
+
+
+def read_off(path):
+    """Read an ASCII OFF mesh (also COFF, NOFF, STOFF ...: colours, normals and texture
+    coordinates are ignored), one row per vertex line, in file order.
+
+    The counts of the header must match the data: exactly one line per declared vertex and
+    face. Polygons are fan-triangulated.
+    """
+    text = _read_text(path, "OFF")
+    lines = []
+    for line in text.splitlines():
+        if "#" in line:
+            line = line.split("#", 1)[0]
+        parts = line.split()
+        if parts:
+            lines.append(parts)
+    if not lines:
+        raise ValueError("empty file")
+    head = lines[0]
+    match = _OFF_KEYWORD.fullmatch(head[0])
+    if match is None:
+        raise ValueError(f"starts with {head[0][:20]!r}, not OFF")
+    if match.group(2) or match.group(3):
+        raise ValueError(f"{head[0]}: only 3-D OFF files are supported")
+    counts, rest = head[1:], lines[1:]
+    if counts and counts[0].upper() == "BINARY":
+        raise ValueError("binary OFF is not supported; save it as ASCII OFF or PLY")
+    if not counts:
+        if not rest:
+            raise ValueError("no vertex and face counts after the OFF line")
+        counts, rest = rest[0], rest[1:]
+    try:
+        nv, nf = int(counts[0]), int(counts[1])
+    except (ValueError, IndexError):
+        raise ValueError(f"the counts line {' '.join(counts)[:40]!r} is not 'vertices faces "
+                         "edges'") from None
+    if nv < 0 or nf < 0:
+        raise ValueError(f"negative counts ({nv} vertices, {nf} faces)")
+    if len(rest) != nv + nf:
+        raise ValueError(f"the header declares {nv} vertices and {nf} faces, but "
+                         f"{len(rest)} lines follow instead of {nv + nf} (truncated file or "
+                         f"wrong counts)")
+    vrows = rest[:nv]
+    for k, r in enumerate(vrows):
+        if len(r) < 3:
+            raise ValueError(f"vertex {k}: {' '.join(r)!r} is not x y z")
+    vertices = _parse_coordinates(vrows, "vertex")
+    frows = rest[nv:]
+    if all(len(r) == 4 and r[0] == "3" for r in frows):  # triangles without colour: at once
+        try:
+            faces = np.array([r[1:] for r in frows], dtype=np.int64).reshape(-1, 3)
+        except ValueError:
+            faces = None
+        if faces is not None and (not faces.size or (faces.min() >= 0 and faces.max() < nv)):
+            return MeshData(vertices=vertices, faces=faces if len(faces) else None, path=path)
+    polygons = []
+    for k, r in enumerate(frows):
+        try:
+            n = int(r[0])
+            corners = [int(t) for t in r[1:n + 1]]
+        except ValueError:
+            raise ValueError(f"face {k}: {' '.join(r)[:40]!r} is not 'n i1 .. in'") from None
+        if n < 0 or len(corners) < n or len(r) > n + 5:  # at most 4 colour values after
+            raise ValueError(f"face {k}: {' '.join(r)[:40]!r} is not 'n i1 .. in "
+                             "[colour]'")
+        if corners and (min(corners) < 0 or max(corners) >= nv):
+            raise ValueError(f"face {k}: vertex indices outside 0..{nv - 1}")
+        polygons.append(corners)
+    faces = _triangulate(polygons)
+    return MeshData(vertices=vertices, faces=faces if len(faces) else None, path=path)
+
+
+_STL_FACET = re.compile(
+    rb"facet\s+normal\s+\S+\s+\S+\s+\S+\s+outer\s+loop\s+"
+    rb"vertex\s+(\S+)\s+(\S+)\s+(\S+)\s+vertex\s+(\S+)\s+(\S+)\s+(\S+)\s+"
+    rb"vertex\s+(\S+)\s+(\S+)\s+(\S+)\s+endloop\s+endfacet", re.IGNORECASE)
+
+
+def _stl_corners(raw):
+    """(3 m, 3) float64 triangle corners of a binary or ASCII STL, in file order."""
+    if len(raw) >= 84:
+        m = int(np.frombuffer(raw, "<u4", 1, 80)[0])
+        if len(raw) == 84 + 50 * m:  # binary, whatever the header text says
+            record = np.dtype([("normal", "<f4", 3), ("corners", "<f4", (3, 3)),
+                               ("attribute", "<u2")])
+            tris = np.frombuffer(raw, record, m, 84)["corners"]
+            return tris.reshape(-1, 3).astype(np.float64)
+    if raw.lstrip()[:5].lower() != b"solid" or b"\0" in raw:  # SolidWorks: binary "solid.."
+        if len(raw) < 84:
+            raise ValueError(f"{len(raw)} bytes: too short for a binary STL, and not ASCII "
+                             "(no 'solid' line)")
+        raise ValueError(f"the binary header declares {m} triangles ({84 + 50 * m} bytes), "
+                         f"but the file has {len(raw)} bytes (truncated or corrupt)")
+    corners = _STL_FACET.findall(raw)
+    rest = _STL_FACET.sub(b"\n", raw)
+    words = Counter()
+    for line in rest.splitlines():
+        word = line.split()[:1]
+        if word and word[0].lower() not in (b"solid", b"endsolid"):
+            raise ValueError(f"incomplete or malformed ASCII facet near "
+                             f"{line.strip()[:40].decode('latin-1')!r}")
+        words.update(w.lower() for w in word)
+    if words[b"solid"] != words[b"endsolid"]:
+        raise ValueError("ASCII file without its 'endsolid' line (truncated)")
+    try:
+        return np.array(corners, dtype=np.float64).reshape(-1, 3)
+    except ValueError:
+        bad = next(t for c in corners for t in c if not _is_number(t))
+        raise ValueError(f"ASCII vertex coordinate {bad[:20].decode('latin-1')!r} is not "
+                         "a number") from None
+
+
+def _is_number(token):
+    try:
+        float(token)
+    except ValueError:
+        return False
+    return True
+
+
+def read_stl(path):
+    """Read a binary or ASCII STL mesh.
+
+    STL stores three unshared corners per triangle; they are merged by exact position in order
+    of first appearance (see the module docstring). Facet normals are ignored. A binary file
+    must be exactly as long as its triangle count says; an ASCII file must hold only complete
+    facets.
+    """
+    with open(path, "rb") as fh:
+        raw = fh.read()
+    try:
+        corners = _stl_corners(raw)
+    except ValueError as exc:
+        raise MeshFileError(f"{path}: corrupt STL: {exc}") from None
+    faces = np.arange(len(corners), dtype=np.int64).reshape(-1, 3)
+    if len(corners):
+        corners, faces = _merge_exact(corners, faces)
+    return MeshData(vertices=corners, faces=faces if len(faces) else None, path=path)
 
 
 def read_xyz(path):
     """Read a whitespace- or comma-separated text point cloud (.xyz, .pts).
 
     Columns: 3 = ``x y z``; 6 = ``x y z nx ny nz``; 4 or 7 = ``x y z intensity [r g b]`` (Leica
-    PTS; the extra columns are kept in ``fields``). A first line holding a single integer (the
-    PTS point count) and ``#`` comments are skipped.
+    PTS; the extra columns are kept in ``fields``). A first line holding a single integer is
+    the point count (PTS) and must match the number of rows; ``#`` comments are skipped.
     """
     with open(path, "r", encoding="utf-8", errors="strict") as fh:
         lines = [ln.split("#", 1)[0].replace(",", " ").split() for ln in fh]
     lines = [ln for ln in lines if ln]
     if lines and len(lines[0]) == 1 and lines[0][0].isdigit():
+        declared = int(lines[0][0])
         lines = lines[1:]
+        if declared != len(lines):
+            raise ValueError(f"the first line declares {declared} points, but {len(lines)} "
+                             "rows follow (truncated file or wrong count)")
     if not lines:
         return MeshData(vertices=np.zeros((0, 3)), path=path)
-    ncol = {len(ln) for ln in lines}
-    if len(ncol) != 1:
-        raise ValueError(f"rows have different numbers of columns: {sorted(ncol)}")
-    ncol = ncol.pop()
+    widths = Counter(len(ln) for ln in lines)
+    if len(widths) != 1:
+        usual = widths.most_common(1)[0][0]
+        odd = next(k for k, ln in enumerate(lines) if len(ln) != usual)
+        raise ValueError(f"rows have different numbers of columns: row {odd + 1} has "
+                         f"{len(lines[odd])}, {widths[usual]} of {len(lines)} rows have {usual}")
+    ncol = len(lines[0])
     if ncol not in (3, 4, 6, 7):
         raise ValueError(f"expected 3 (x y z), 6 (x y z nx ny nz), 4 or 7 (PTS) columns, "
                          f"got {ncol}")
@@ -270,7 +556,7 @@ def read_las(path):
     return MeshData(vertices=xyz, normals=normals, fields=fields, path=path)
 
 
-READERS = {".ply": read_ply, ".obj": read_trimesh, ".off": read_trimesh, ".stl": read_trimesh,
+READERS = {".ply": read_ply, ".obj": read_obj, ".off": read_off, ".stl": read_stl,
            ".xyz": read_xyz, ".pts": read_xyz, ".las": read_las, ".laz": read_las}
 
 
@@ -283,6 +569,49 @@ def _extension(path):
     return os.path.splitext(str(path))[1].lower()
 
 
+_FILE_KINDS = ((stat.S_ISFIFO, "FIFO"), (stat.S_ISSOCK, "socket"),
+               (stat.S_ISCHR, "character device"), (stat.S_ISBLK, "block device"))
+
+
+def _check_readable_file(path):
+    """MeshFileError saying why ``path`` is not a regular file one can open; never opens it
+    (opening a FIFO would block)."""
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        if os.path.islink(path):
+            raise MeshFileError(f"{path}: broken symbolic link (its target "
+                                f"{os.readlink(path)!r} does not exist)") from None
+        raise MeshFileError(f"{path}: no such file") from None
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise MeshFileError(f"{path}: symbolic link loop (the link points, through "
+                                "other links, back to itself)") from None
+        raise MeshFileError(f"{path}: cannot read file ({exc.strerror or exc})") from None
+    if stat.S_ISDIR(st.st_mode):
+        raise MeshFileError(f"{path}: is a directory, not a mesh or point-cloud file")
+    if not stat.S_ISREG(st.st_mode):
+        kind = next((name for test, name in _FILE_KINDS if test(st.st_mode)), "special file")
+        raise MeshFileError(f"{path}: is not a regular file ({kind})")
+
+
+@contextlib.contextmanager
+def _quiet_libraries():
+    """Silence warnings and the loggers of the parsing libraries while a file is read: their
+    complaints about a corrupt file become the reader's one-line MeshFileError instead."""
+    loggers = [logging.getLogger(name) for name in ("trimesh", "plyfile", "laspy")]
+    levels = [lg.level for lg in loggers]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for lg in loggers:  # the level, not ``disabled``: it also holds for child loggers
+            lg.setLevel(logging.CRITICAL + 1)
+        try:
+            yield
+        finally:
+            for lg, level in zip(loggers, levels):
+                lg.setLevel(level)
+
+
 def read(path):
     """Read a mesh or point cloud; the reader is chosen by extension (see :data:`READERS`).
 
@@ -293,13 +622,15 @@ def read(path):
     Returns
     -------
     MeshData
-        ``vertices`` (n, 3) float64 with n >= 1 and at least one finite row.
+        ``vertices`` (n, 3) float64 with n >= 1 and at least one finite row, one row per
+        vertex of the file in file order; ``faces`` (m, 3) int64 indices into them, or None.
 
     Raises
     ------
     MeshFileError
-        Missing, unreadable or corrupt file, unsupported extension, no vertices, no finite
-        coordinates. The message starts with the file name.
+        Missing, unreadable or corrupt file (counts of a header that do not match the data
+        included), not a regular file, unsupported extension, no vertices, no finite
+        coordinates. The message is one line and starts with the file name.
 
     Examples
     --------
@@ -309,23 +640,32 @@ def read(path):
     """
     path = os.fspath(path)
     ext = _extension(path)
+    _check_readable_file(path)
     if ext not in READERS:
         raise MeshFileError(f"{path}: unsupported file type {ext or '(no extension)'!r}; "
                             f"readable: {', '.join(sorted(READERS))}")
-    if not os.path.isfile(path):
-        raise MeshFileError(f"{path}: no such file")
+    fmt = ext[1:].upper()
     try:
-        data = READERS[ext](path)
-    except MeshFileError:
-        raise
+        with _quiet_libraries():
+            data = READERS[ext](path)
+    except MeshFileError as exc:
+        raise MeshFileError(first_line(exc)) from exc
     except UnicodeDecodeError as exc:  # binary junk where a text header or table belongs
-        raise MeshFileError(f"{path}: not a valid {ext[1:].upper()} file (binary data where "
+        raise MeshFileError(f"{path}: not a valid {fmt} file (binary data where "
                             f"text was expected at byte {exc.start})") from exc
+    except MemoryError as exc:
+        raise MeshFileError(f"{path}: too large to read into memory "
+                            f"({os.path.getsize(path)} bytes)") from exc
     except OSError as exc:
-        raise MeshFileError(f"{path}: cannot read file ({exc})") from exc
+        raise MeshFileError(f"{path}: cannot read file ({exc.strerror or exc})") from exc
     except Exception as exc:  # parsers raise anything on corrupt input
-        raise MeshFileError(f"{path}: not a valid {ext[1:].upper()} file "
+        raise MeshFileError(f"{path}: not a valid {fmt} file "
                             f"({first_line(exc)})") from exc
+    except BaseException as exc:  # a panic of a Rust parser (lazrs) is not an Exception
+        if type(exc).__name__ != "PanicException":
+            raise
+        raise MeshFileError(f"{path}: not a valid {fmt} file (the decoder failed: "
+                            f"{first_line(exc)})") from exc
     data.path = path
     if len(data.vertices) == 0:
         raise MeshFileError(f"{path}: the file holds no vertices")

@@ -30,6 +30,12 @@ PLANE_OFFSET = 0.25
 # Points per chunk handed to one thread (keeps scratch arrays per chunk, not per point).
 CHUNK = 256
 
+# Most planes through the normal (``ndir``) the estimator accepts. Each thread holds
+# 2 * ndir half-set accumulators and the robust step sorts the 2 * ndir circle fits by
+# insertion (quadratic); beyond 64 planes (2.8 degrees apart) the slabs of half-width
+# 0.25 radius overlap so much that more planes add no information.
+MAX_DIRECTIONS = 64
+
 @njit(cache=True)
 def _smallest_eigvec_jacobi3(a, out):
     """Unit eigenvector of the smallest eigenvalue of the symmetric 3x3 ``a`` (overwritten).
@@ -781,6 +787,24 @@ def kring_ball_csr(adj_ptr, adj_idx, points, query, radius, stamp, queue, tag0):
                 _kring_one(adj_ptr, adj_idx, points, query[qi], 3 * (tag0 + qi) + 2, r2max,
                            stamp[t], queue[t], indices, counts[qi], counts[qi + 1])
     return counts, indices
+
+
+@njit(parallel=True, cache=True)
+def kring_counts(adj_ptr, adj_idx, points, query, radius, stamp, queue, tag0):
+    """(m,) int64 size of each query vertex's radius-limited k-ring (what
+    :func:`kring_ball_csr` would list, nothing stored: to size the work before doing it).
+    Work arrays and ``tag0`` as there."""
+    m = query.shape[0]
+    r2max = radius * radius
+    out = np.zeros(m, dtype=np.int64)
+    nthreads = max(1, min(m, stamp.shape[0]))
+    per = (m + nthreads - 1) // nthreads
+    dummy = np.empty(0, dtype=np.int32)
+    for t in prange(nthreads):
+        for qi in range(t * per, min(m, (t + 1) * per)):
+            out[qi] = _kring_one(adj_ptr, adj_idx, points, query[qi], 3 * (tag0 + qi), r2max,
+                                 stamp[t], queue[t], dummy, 0, 0)
+    return out
 
 
 @njit(parallel=True, cache=True)

@@ -13,8 +13,9 @@ from scipy.spatial import cKDTree
 
 from . import kernels
 
-__all__ = ["edge_adjacency", "kring_neighbors", "KringWork", "BallGrid", "ball_grid", "spatial_order",
-           "ball_neighbors", "default_radius"]
+__all__ = ["edge_adjacency", "kring_neighbors", "kring_counts", "KringWork", "BallGrid",
+           "ball_grid", "spatial_order", "ball_neighbors", "ball_counts", "default_radius",
+           "power_of_two_scale"]
 
 
 def edge_adjacency(faces, n_vertices):
@@ -84,6 +85,18 @@ def kring_neighbors(points, adjacency, radius, query, work=None):
     tag0 = work.take_tags(len(query))
     return kernels.kring_ball_csr(adjacency[0], adjacency[1], points, query, float(radius),
                                        work.stamp, work.queue, tag0)
+
+
+def kring_counts(points, adjacency, radius, query, work=None):
+    """(m,) int64 size of each query vertex's neighbourhood in :func:`kring_neighbors`,
+    without storing the lists (to size the work first)."""
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    query = np.ascontiguousarray(query, dtype=np.int64)
+    if work is None:
+        work = KringWork(len(points))
+    tag0 = work.take_tags(len(query))
+    return kernels.kring_counts(adjacency[0], adjacency[1], points, query, float(radius),
+                                work.stamp, work.queue, tag0)
 
 
 class BallGrid(NamedTuple):
@@ -205,6 +218,21 @@ def ball_neighbors(tree, finite_index, query_points, radius, ascending=True, pos
     return indptr, finite_index[flat]
 
 
+def ball_counts(tree, query_points, radius):
+    """(m,) int64 number of points :func:`ball_neighbors` would list for each query point,
+    without storing the lists (to size the work first). ``tree`` as there."""
+    q = np.ascontiguousarray(query_points, dtype=np.float64)
+    if isinstance(tree, BallGrid):
+        return kernels.cell_ball_counts(tree.order, tree.sorted_points, tree.cell_start,
+                                        tree.base, tree.cell, tree.dims, tree.table_keys,
+                                        tree.table_cells, q, tree.radius)
+    out = np.zeros(len(q), dtype=np.int64)
+    ok = np.isfinite(q).all(axis=1)
+    if ok.any():
+        out[ok] = tree.query_ball_point(q[ok], radius, workers=-1, return_length=True)
+    return out
+
+
 def spatial_order(points, cell):
     """Order that visits the points grid cell by grid cell, so that neighbours are near in it.
 
@@ -250,13 +278,43 @@ def spatial_order(points, cell):
     return np.concatenate([order, rest])
 
 
+# Lengths outside [2**-200, 2**200] are computed on coordinates scaled by a power of two
+# (exact): their squares would overflow or lose precision in float64.
+_SCALE_RANGE = (2.0 ** -200, 2.0 ** 200)
+
+
+def power_of_two_scale(length):
+    """1.0 if ``length`` (model units) squares safely in float64, else the power of two ``s``
+    with ``length * s`` in [0.5, 1) (at most 2**1000): computing on ``points * s`` is then
+    exact and safe."""
+    length = float(length)
+    if not (np.isfinite(length) and length > 0) or _SCALE_RANGE[0] <= length <= _SCALE_RANGE[1]:
+        return 1.0
+    # below 2**-1000 (subnormal lengths) the exact power would overflow: 2**1000 suffices
+    return float(np.ldexp(1.0, min(-int(np.frexp(length)[1]), 1000)))
+
+
+def typical_extent(points, sample=20000, seed=0):
+    """Median distance (max norm) of the finite points from their coordinate-wise median, on
+    up to ``sample`` of them: the size of the bulk of a cloud, unmoved by a few far points."""
+    p = np.asarray(points, dtype=np.float64)
+    p = p[np.isfinite(p).all(axis=1)]
+    if len(p) > sample:
+        p = p[np.random.default_rng(seed).choice(len(p), sample, replace=False)]
+    if len(p) == 0:
+        return float("nan")
+    return float(np.median(np.abs(p - np.median(p, axis=0)).max(axis=1)))
+
+
 def default_radius(points, target_neighbors=100, sample=20000, seed=0):
     """Radius (model units) whose ball holds about ``target_neighbors`` points of the sampling.
 
     The local area density is estimated from the distance d16 to the 16th nearest neighbour,
     ``rho = 16 / (pi d16^2)``, on up to ``sample`` points; the radius is
     ``sqrt(target / (pi rho))`` with the median of d16^2. For a regular grid of spacing h this
-    is about 5.6 h; for a mesh about 5 mean edge lengths.
+    is about 5.6 h; for a mesh about 5 mean edge lengths. A few far-away points do not move it
+    (a median); duplicated points count once where most points are duplicates; clouds of any
+    scale (1e-300 ... 1e300) are measured on coordinates scaled by a power of two.
 
     Parameters
     ----------
@@ -264,17 +322,32 @@ def default_radius(points, target_neighbors=100, sample=20000, seed=0):
 
     Returns
     -------
-    float (NaN if there are fewer than 2 finite points)
+    float (NaN if there are fewer than 2 distinct finite points)
     """
     p = np.asarray(points, dtype=np.float64)
     p = p[np.isfinite(p).all(axis=1)]
     if len(p) < 2:
         return float("nan")
+    s = power_of_two_scale(typical_extent(p, sample, seed))
+    if s != 1.0:
+        with np.errstate(over="ignore"):
+            scaled = p * s
+        return default_radius(scaled, target_neighbors, sample, seed) / s
+    radius = _default_radius(p, target_neighbors, sample, seed)
+    if not np.isfinite(radius):
+        # most points duplicated (coincident points are nobody's neighbour): distinct ones
+        p = np.unique(p, axis=0)
+        radius = _default_radius(p, target_neighbors, sample, seed) if len(p) > 1 else radius
+    return radius
+
+
+def _default_radius(p, target_neighbors, sample, seed):
     k = min(16, len(p) - 1)
     rng = np.random.default_rng(seed)
     probe = p if len(p) <= sample else p[rng.choice(len(p), sample, replace=False)]
     d, _ = cKDTree(p).query(probe, k=k + 1, workers=-1)
-    dk2 = np.median(d[:, k] ** 2)
-    if not dk2 > 0:
+    with np.errstate(over="ignore"):
+        dk2 = np.median(d[:, k] ** 2)
+    if not (np.isfinite(dk2) and dk2 > 0):
         return float("nan")
     return float(np.sqrt(target_neighbors / k * dk2))

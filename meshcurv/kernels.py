@@ -36,6 +36,15 @@ CHUNK = 256
 # 0.25 radius overlap so much that more planes add no information.
 MAX_DIRECTIONS = 64
 
+# Fewest spread of the directions the circle fits measured for an estimate: the smaller
+# eigenvalue of the covariance of their (cos 2phi, sin 2phi) mixes (see ``_sample_design``)
+# over the samples kept. Measured: directions all around ~0.34 (sphere), mesh borders and
+# corners >= 0.15, the border of a random half-sphere cloud >= 0.027, the corners of a random
+# square patch 0.0069 .. 0.0095 (still accurate); neighbours along one curve (the rim of a
+# triangle fan) 0 .. 0.0018: there the Euler model's B and C are not determined, and k1, k2
+# would be noise (often exactly 0) marked valid.
+MIN_DIRECTION_SPREAD = 3e-3
+
 @njit(cache=True)
 def _smallest_eigvec_jacobi3(a, out):
     """Unit eigenvector of the smallest eigenvalue of the symmetric 3x3 ``a`` (overwritten).
@@ -295,16 +304,49 @@ def _model(rows, s, npar, sol):
 
 
 @njit(cache=True)
+def _direction_spread(mix, active, m):
+    """Smaller eigenvalue of the covariance of the active samples' direction mixes
+    ``mix[s] = (cos 2phi, sin 2phi)``: how far the measured directions span the Euler model."""
+    cnt = 0.0
+    mc = 0.0
+    ms = 0.0
+    for s in range(m):
+        if active[s] != 0.0:
+            cnt += 1.0
+            mc += mix[s, 0]
+            ms += mix[s, 1]
+    if cnt < 2.0:
+        return 0.0
+    mc /= cnt
+    ms /= cnt
+    a = 0.0
+    b = 0.0
+    c = 0.0
+    for s in range(m):
+        if active[s] != 0.0:
+            dc = mix[s, 0] - mc
+            ds = mix[s, 1] - ms
+            a += dc * dc
+            b += dc * ds
+            c += ds * ds
+    a /= cnt
+    b /= cnt
+    c /= cnt
+    return 0.5 * (a + c) - math.sqrt(0.25 * (a - c) * (a - c) + b * b)
+
+
+@njit(cache=True)
 def _estimate_one(points, nbr, lo, hi, x, n, radius, ndir, slab, min_points, min_spread,
                   beta, unit_norm, corrected, half_frequency, robust,
                   ca, sa, dirs, acc, kappa, rows, active, scratch, mat, rhs, sol, b3, ev, tu, tv,
-                  res, rank):
+                  res, rank, mix):
     """Circle fits in 2*ndir half-sets around one point, then the Euler model fit.
 
     Writes (k1, k2, theta1, n_used_samples, residual_rms, n_neighbours) into ``res`` (which
     the caller resets to NaN, NaN, NaN, 0, NaN, 0) and the frame into tu, tv. Lengths inside are in units of ``radius``. The points' weights are
     ``(1 - beta) + beta (1 - r^2)^WEIGHT_POWER``: equal weights at beta = 0, distance weights
-    at beta = 1.
+    at beta = 1. ``mix`` (2 ndir, 2) is scratch for the measured direction mix of each sample
+    (whatever ``corrected``): an estimate needs them spread by ``MIN_DIRECTION_SPREAD``.
     """
     nh = 2 * ndir
     for k in range(nh):
@@ -364,7 +406,10 @@ def _estimate_one(points, nbr, lo, hi, x, n, radius, ndir, slab, min_points, min
             if not np.isfinite(kap):
                 continue
             kappa[m] = kap
-            dc, ds = _sample_design(acc, k, corrected, dirs[k, 2], dirs[k, 3])
+            mc, ms = _sample_design(acc, k, True, dirs[k, 2], dirs[k, 3])
+            mix[m, 0] = mc
+            mix[m, 1] = ms
+            dc, ds = (mc, ms) if corrected else (dirs[k, 2], dirs[k, 3])
             rows[m, 0] = 1.0
             rows[m, 1] = dc
             rows[m, 2] = ds
@@ -406,6 +451,8 @@ def _estimate_one(points, nbr, lo, hi, x, n, radius, ndir, slab, min_points, min
         if active[s] != 0.0:
             used += 1
             sse += (kappa[s] - _model(rows, s, npar, sol)) ** 2
+    if _direction_spread(mix, active, m) < MIN_DIRECTION_SPREAD:
+        return
     amp = math.sqrt(sol[1] * sol[1] + sol[2] * sol[2])
     res[0] = (sol[0] + amp) * inv_r
     res[1] = (sol[0] - amp) * inv_r
@@ -474,6 +521,7 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
         res = np.empty(6)
         x = np.empty(3)
         n = np.empty(3)
+        mix = np.empty((nh, 2))
         for q in range(c * CHUNK, min(m, (c + 1) * CHUNK)):
             for a in range(3):
                 x[a] = query_points[q, a]
@@ -489,7 +537,7 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
                 _estimate_one(points, indices, indptr[q], indptr[q + 1], x, n, radius, ndir,
                               slab, min_points, min_spread, blend[q], unit_norm, corrected,
                               half_frequency, robust, ca, sa, dirs, acc, kappa, rows, active,
-                              scratch, mat, rhs, sol, b3, ev, tu, tv, res, rank)
+                              scratch, mat, rhs, sol, b3, ev, tu, tv, res, rank, mix)
             n_samples[q] = res[3]
             residual[q] = res[4]
             n_neighbors[q] = res[5]

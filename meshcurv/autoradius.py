@@ -94,7 +94,8 @@ def estimate_sampling(vertices, k=24, sample=2000, seed=0):
     dist, nb = dist[~far], nb[~far]
     if len(nb) == 0:
         return float("nan"), float("nan")
-    density = float(np.median(k / (np.pi * np.maximum(dist[:, -1], 1e-300) ** 2)))
+    with np.errstate(divide="ignore", under="ignore"):      # duplicates: d_k = 0
+        density = float(np.median(k / (np.pi * np.maximum(dist[:, -1], 1e-300) ** 2)))
     with np.errstate(over="ignore", invalid="ignore"):
         q = v[nb] - v[nb].mean(axis=1, keepdims=True)                # (s, k, 3)
     # neighbourhoods too large for the quadric's moments in float64 (a far point's): left out
@@ -201,7 +202,8 @@ def auto_radius(vertices, faces=None, normals=None, *, weighting="none", min_poi
         radius = default_radius(v)
         return (radius, dict(density=np.nan, sigma=np.nan, kappa=np.nan, beta=np.nan,
                              r_min=radius, r_max=radius, probes=())) if details else radius
-    diag = float(np.linalg.norm(np.ptp(v[finite], axis=0)))
+    with np.errstate(over="ignore", invalid="ignore"):        # far points: inf
+        diag = float(np.linalg.norm(np.ptp(v[finite], axis=0)))
     r_min = np.sqrt(min_points / (np.pi * density))
     if faces is not None:
         used = np.unique(np.asarray(faces, dtype=np.int64).ravel())

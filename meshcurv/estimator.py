@@ -14,7 +14,8 @@ from .neighborhoods import (BallGrid, KringWork, ball_counts, ball_grid, ball_ne
                             default_radius, edge_adjacency, kring_counts, kring_neighbors,
                             power_of_two_scale, spatial_order)
 
-__all__ = ["CurvatureResult", "principal_curvatures", "estimate_normals", "check_options"]
+__all__ = ["CurvatureResult", "principal_curvatures", "estimate_normals", "check_options",
+           "no_estimate_reason"]
 
 # Query points per call into the kernels: bounds the memory of the neighbour lists (about
 # 0.8 kB per query point at 100 neighbours) at no measurable cost in speed.
@@ -282,8 +283,32 @@ def _no_default_radius(points):
                 "derived from their spacing; pass a radius to get all-invalid rows")
     with np.errstate(over="ignore", invalid="ignore"):
         spread = np.ptp(points, axis=0)
-    return (f"no radius can be derived from the spacing of these {len(points)} points (extent "
-            f"{np.array2string(spread, precision=3)}); pass a radius in model units")
+    why = ("their distances are too large to square in float64"
+           if not np.all(np.isfinite(spread)) or spread.max() > 1e150 else
+           "most of them coincide")
+    return (f"no radius can be derived from the spacing of these {len(points)} points ({why}; "
+            f"extent {np.array2string(spread, precision=3)}); pass a radius in model units")
+
+
+def no_estimate_reason(result, n_points, option="radius"):
+    """Why a :class:`CurvatureResult` with no valid row got none, and what to try: one line.
+
+    ``n_points`` is the number of finite input points; ``option`` names the radius as the
+    caller's user knows it (e.g. "--radius"). Balls holding nearly every point mean a radius
+    far too large (fits see a whole object, no surface patch); balls with few neighbours one
+    too small.
+    """
+    nn = np.asarray(result.n_neighbors)
+    med = float(np.median(nn)) if len(nn) else 0.0
+    if n_points > 2 and med >= 0.5 * (n_points - 1):
+        return (f"the radius {result.radius:.6g} is far too large: each ball holds nearly every "
+                f"point (median {med:.0f} of {n_points}); try a much smaller {option}")
+    if med < 12:
+        return (f"the radius {result.radius:.6g} is too small: its balls hold a median of "
+                f"{med:.0f} neighbours; try a larger {option}")
+    return (f"no neighbourhood of radius {result.radius:.6g} (median {med:.0f} neighbours) spans "
+            f"a surface patch in enough directions (points along lines or curves, one-sided "
+            f"or coincident); try another {option}")
 
 
 def check_options(**options):

@@ -303,7 +303,8 @@ def typical_extent(points, sample=20000, seed=0):
         p = p[np.random.default_rng(seed).choice(len(p), sample, replace=False)]
     if len(p) == 0:
         return float("nan")
-    return float(np.median(np.abs(p - np.median(p, axis=0)).max(axis=1)))
+    with np.errstate(over="ignore", invalid="ignore"):     # +-1e308: inf, NaN (ignored)
+        return float(np.median(np.abs(p - np.median(p, axis=0)).max(axis=1)))
 
 
 def default_radius(points, target_neighbors=100, sample=20000, seed=0):

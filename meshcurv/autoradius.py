@@ -89,8 +89,20 @@ def estimate_sampling(vertices, k=24, sample=2000, seed=0):
     tree = cKDTree(v)
     idx = _sample(len(v), sample, seed)
     dist, nb = tree.query(v[idx], k)
-    density = float(np.median(k / (np.pi * np.maximum(dist[:, -1], 1e-300) ** 2)))
-    q = v[nb] - v[nb].mean(axis=1, keepdims=True)                # (s, k, 3)
+    # k-d tree distances whose squares overflow come back inf (and index n): far points
+    far = ~np.isfinite(dist[:, -1])
+    dist, nb = dist[~far], nb[~far]
+    if len(nb) == 0:
+        return float("nan"), float("nan")
+    with np.errstate(divide="ignore", under="ignore"):      # duplicates: d_k = 0
+        density = float(np.median(k / (np.pi * np.maximum(dist[:, -1], 1e-300) ** 2)))
+    with np.errstate(over="ignore", invalid="ignore"):
+        q = v[nb] - v[nb].mean(axis=1, keepdims=True)                # (s, k, 3)
+    # neighbourhoods too large for the quadric's moments in float64 (a far point's): left out
+    sane = np.all(np.abs(q) < 1e60, axis=(1, 2))   # design moments: 4th powers
+    idx, q = idx[~far][sane], q[sane]
+    if len(q) == 0:
+        return density, float("nan")
     _, _, vt = np.linalg.svd(q, full_matrices=False)             # rows of vt: PCA axes
     u, w, h = (np.einsum("skj,sj->sk", q, vt[:, i]) for i in range(3))
     design = np.stack([np.ones_like(u), u, w, u * u, u * w, w * w], axis=-1)
@@ -164,16 +176,34 @@ def auto_radius(vertices, faces=None, normals=None, *, weighting="none", min_poi
     if weighting not in NOISE_GAIN:
         raise ValueError(f"weighting must be one of {sorted(NOISE_GAIN)}, got {weighting!r}")
     gain = NOISE_GAIN[weighting]
+    from .neighborhoods import power_of_two_scale, typical_extent
+
+    s = power_of_two_scale(typical_extent(v, sample, seed))
+    if s != 1.0:
+        # a cloud too large (small) to square its lengths in float64: measured on coordinates
+        # scaled by a power of two (exact), the radius scaled back
+        if not isinstance(settings.get("orientation", "mst"), str):
+            settings["orientation"] = np.asarray(settings["orientation"], dtype=np.float64) * s
+        with np.errstate(over="ignore"):
+            out = auto_radius(v * s, faces, normals, weighting=weighting, min_points=min_points,
+                              max_angle=max_angle, max_fraction=max_fraction,
+                              tolerance=tolerance, probe_ratio=probe_ratio, sample=sample,
+                              seed=seed, details=details, **settings)
+        if details:
+            return out[0] / s, out[1]
+        return out / s
     finite = np.isfinite(v).all(axis=1)
-    if finite.sum() < 24:
-        # too few points for the noise estimate: the sampling-only default
+    density, sigma = (estimate_sampling(v[finite], sample=sample, seed=seed)
+                      if finite.sum() >= 24 else (np.nan, np.nan))
+    if not (np.isfinite(density) and density > 0 and np.isfinite(sigma)):
+        # too few (distinct) points for the noise estimate: the sampling-only default
         from .neighborhoods import default_radius
 
         radius = default_radius(v)
         return (radius, dict(density=np.nan, sigma=np.nan, kappa=np.nan, beta=np.nan,
                              r_min=radius, r_max=radius, probes=())) if details else radius
-    density, sigma = estimate_sampling(v[finite], sample=sample, seed=seed)
-    diag = float(np.linalg.norm(np.ptp(v[finite], axis=0)))
+    with np.errstate(over="ignore", invalid="ignore"):        # far points: inf
+        diag = float(np.linalg.norm(np.ptp(v[finite], axis=0)))
     r_min = np.sqrt(min_points / (np.pi * density))
     if faces is not None:
         used = np.unique(np.asarray(faces, dtype=np.int64).ravel())

@@ -10,14 +10,21 @@ from scipy.spatial import cKDTree
 from tqdm.auto import tqdm
 
 from . import kernels, normals as nrm, shape
-from .neighborhoods import (BallGrid, KringWork, ball_grid, ball_neighbors, default_radius,
-                            edge_adjacency, kring_neighbors, spatial_order)
+from .neighborhoods import (BallGrid, KringWork, ball_counts, ball_grid, ball_neighbors,
+                            default_radius, edge_adjacency, kring_counts, kring_neighbors,
+                            power_of_two_scale, spatial_order)
 
-__all__ = ["CurvatureResult", "principal_curvatures", "estimate_normals", "check_options"]
+__all__ = ["CurvatureResult", "principal_curvatures", "estimate_normals", "check_options",
+           "no_estimate_reason"]
 
 # Query points per call into the kernels: bounds the memory of the neighbour lists (about
 # 0.8 kB per query point at 100 neighbours) at no measurable cost in speed.
 _BLOCK = 16384
+# Neighbour list entries per block (int64): blocks shrink where the balls hold more than
+# 1024 points (a radius much larger than the sampling), so their lists stay within ~128 MB.
+_BLOCK_ENTRIES = 2 ** 24
+# Most neighbour pairs (query points x neighbours) a call takes on: hours of work beyond.
+MAX_PAIRS = 1e11
 
 # Noise level (RMS height residual of the local cubic fit, as a fraction of the radius) at
 # which weighting="auto" mixes equal and distance weights half and half. Measured: clean
@@ -146,26 +153,44 @@ def _as_arrays(vertices, faces, normals):
     return v, f, nv
 
 
-def _blocks(order, progress, desc):
-    """Blocks of ``_BLOCK`` positions, with a progress bar when asked.
+def _blocks(order, progress, desc, size=_BLOCK):
+    """Blocks of ``size`` positions, with a progress bar when asked.
 
     ``order`` is an index array (blocks are its pieces) or a count m (blocks are slices of
     ``range(m)``, which index without copies).
     """
     m = order if isinstance(order, (int, np.integer)) else len(order)
     bar = tqdm(total=m, desc=desc, unit="pt", disable=not progress, leave=False)
-    for s in range(0, m, _BLOCK):
-        e = min(s + _BLOCK, m)
+    for s in range(0, m, size):
+        e = min(s + size, m)
         yield slice(s, e) if isinstance(order, (int, np.integer)) else order[s:e]
         bar.update(e - s)
     bar.close()
 
 
+def _block_size(counts, n_queries, radius, what):
+    """Queries per block for neighbour lists of about ``mean(counts)`` entries, raising
+    ValueError where ``n_queries`` such lists are more work than :data:`MAX_PAIRS`."""
+    per = max(float(np.mean(counts)) if len(counts) else 0.0, 1.0)
+    if per * n_queries > MAX_PAIRS:
+        raise ValueError(
+            f"radius {radius:.6g} is too large for these {what}: each neighbourhood would hold "
+            f"about {per:.3g} points ({per * n_queries:.3g} neighbour pairs in all, far too "
+            f"many to compute); use a smaller radius")
+    return int(min(_BLOCK, max(1, _BLOCK_ENTRIES // per)))
+
+
+def _sample_queries(m, size=64):
+    """Up to ``size`` positions spread over ``range(m)``."""
+    return np.unique(np.linspace(0, m - 1, min(m, size)).astype(np.int64)) if m else \
+        np.zeros(0, dtype=np.int64)
+
+
 def _ball_search(v, finite, radius):
-    """Ball queries over the finite rows of ``v``: ``(neighbours, kernel_points, rank)``.
+    """Ball queries over the finite rows of ``v``: ``(neighbours, counts, kernel_points, rank)``.
 
     ``neighbours(idx)`` gives the CSR lists of the points ``v[idx]``, unsorted (the kernels do
-    not depend on the order within a list). With a uniform grid (when one fits; the same lists
+    not depend on the order within a list); ``counts(idx)`` their lengths, nothing stored. With a uniform grid (when one fits; the same lists
     as a k-d tree, several times faster) the lists hold rows of ``kernel_points``, the grid's
     copy of the points in grid order, where a neighbourhood lies together in memory however
     the input is ordered; ``rank`` gives their vertex indices. With the k-d tree fallback
@@ -181,10 +206,16 @@ def _ball_search(v, finite, radius):
             return np.zeros(len(idx) + 1, dtype=np.int64), np.zeros(0, dtype=np.int64)
         return ball_neighbors(tree, finite, v[idx], radius, ascending=False, positions=in_grid)
 
-    return neighbours, (tree.sorted_points if in_grid else v), (tree.order if in_grid else None)
+    def counts(idx):
+        if tree is None:
+            return np.zeros(len(idx), dtype=np.int64)
+        return ball_counts(tree, v[idx], radius)
+
+    return (neighbours, counts, (tree.sorted_points if in_grid else v),
+            (tree.order if in_grid else None))
 
 
-def _mst_normals(v, radius, neighbours, kernel_points, rank, progress):
+def _mst_normals(v, radius, neighbours, kernel_points, rank, progress, block=_BLOCK):
     """PCA normals of every point, oriented along a spanning tree whose graph joins each point
     to its nearest neighbours, taken from the ball lists at hand (see :func:`_ball_search`)."""
     n = len(v)
@@ -192,7 +223,7 @@ def _mst_normals(v, radius, neighbours, kernel_points, rank, progress):
     graph = np.full((n, _TREE_NEIGHBOURS), -1, dtype=np.int32)
     # the grid's own cell order (``rank``) when there is one, else one made for the purpose
     order = rank if rank is not None else spatial_order(v, radius)
-    for pos in _blocks(order, progress, "normals"):
+    for pos in _blocks(order, progress, "normals", block):
         indptr, indices = neighbours(pos)
         nv[pos] = nrm.pca_normals(kernel_points, v[pos], indptr, indices, radius)
         near = kernels.nearest_in_lists(kernel_points, v[pos], indptr, indices, _TREE_NEIGHBOURS)
@@ -232,9 +263,52 @@ def estimate_normals(points, radius, progress=False):
         raise ValueError(f"points must have shape (n, 3), got {v.shape}")
     radius = float(radius)
     if not (np.isfinite(radius) and radius > 0):
-        raise ValueError(f"radius must be a positive number of model units, got {radius}")
+        raise ValueError(f"radius must be a positive finite number of model units, got {radius}")
+    s = power_of_two_scale(radius)
+    if s != 1.0:
+        # lengths whose squares overflow (underflow) in float64: on exactly rescaled points
+        with np.errstate(over="ignore"):
+            return estimate_normals(v * s, radius * s, progress)
     finite = np.flatnonzero(np.isfinite(v).all(axis=1))
-    return _mst_normals(v, radius, *_ball_search(v, finite, radius), progress)
+    neighbours, counts, kernel_points, rank = _ball_search(v, finite, radius)
+    block = _block_size(counts(finite[_sample_queries(len(finite))]), len(finite), radius,
+                        "points")
+    return _mst_normals(v, radius, neighbours, kernel_points, rank, progress, block)
+
+
+def _no_default_radius(points):
+    """Why no default radius can be derived from the finite ``points`` (2 or more)."""
+    if np.all(points == points[0]):
+        return (f"all {len(points)} points coincide: there is no surface and no radius can be "
+                "derived from their spacing; pass a radius to get all-invalid rows")
+    with np.errstate(over="ignore", invalid="ignore"):
+        spread = np.ptp(points, axis=0)
+    why = ("their distances are too large to square in float64"
+           if not np.all(np.isfinite(spread)) or spread.max() > 1e150 else
+           "most of them coincide")
+    return (f"no radius can be derived from the spacing of these {len(points)} points ({why}; "
+            f"extent {np.array2string(spread, precision=3)}); pass a radius in model units")
+
+
+def no_estimate_reason(result, n_points, option="radius"):
+    """Why a :class:`CurvatureResult` with no valid row got none, and what to try: one line.
+
+    ``n_points`` is the number of finite input points; ``option`` names the radius as the
+    caller's user knows it (e.g. "--radius"). Balls holding nearly every point mean a radius
+    far too large (fits see a whole object, no surface patch); balls with few neighbours one
+    too small.
+    """
+    nn = np.asarray(result.n_neighbors)
+    med = float(np.median(nn)) if len(nn) else 0.0
+    if n_points > 2 and med >= 0.5 * (n_points - 1):
+        return (f"the radius {result.radius:.6g} is far too large: each ball holds nearly every "
+                f"point (median {med:.0f} of {n_points}); try a much smaller {option}")
+    if med < 12:
+        return (f"the radius {result.radius:.6g} is too small: its balls hold a median of "
+                f"{med:.0f} neighbours; try a larger {option}")
+    return (f"no neighbourhood of radius {result.radius:.6g} (median {med:.0f} neighbours) spans "
+            f"a surface patch in enough directions (points along lines or curves, one-sided "
+            f"or coincident); try another {option}")
 
 
 def check_options(**options):
@@ -255,8 +329,15 @@ def check_options(**options):
         if name in options and options[name] not in allowed:
             raise ValueError(f"{name} must be one of {', '.join(map(repr, allowed))}, "
                              f"got {options[name]!r}")
-    if "n_directions" in options and int(options["n_directions"]) < 3:
-        raise ValueError(f"n_directions must be at least 3, got {options['n_directions']}")
+    if "n_directions" in options:
+        nd = options["n_directions"]
+        try:
+            ok = float(nd) == int(nd) and 3 <= int(nd) <= kernels.MAX_DIRECTIONS
+        except (TypeError, ValueError, OverflowError):
+            ok = False
+        if not ok:
+            raise ValueError(f"n_directions must be a whole number from 3 to "
+                             f"{kernels.MAX_DIRECTIONS}, got {nd!r}")
     orientation = options.get("orientation", "mst")
     if isinstance(orientation, str) and orientation == "mst":
         return orientation
@@ -396,6 +477,8 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
         query = np.asarray(query, dtype=np.int64).ravel()
         if query.size and (query.min() < 0 or query.max() >= n):
             raise ValueError(f"query indices must lie in 0..{n - 1}")
+    finite = np.flatnonzero(np.isfinite(v).all(axis=1))
+    derived = radius is None or isinstance(radius, str)
     if radius is None:
         radius = default_radius(v)
     elif isinstance(radius, str):
@@ -412,9 +495,34 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
                              section_blend=section_blend, robust=robust,
                              half_frequency=half_frequency)
     radius = float(radius)
-    finite = np.flatnonzero(np.isfinite(v).all(axis=1))
+    if derived and len(finite) > 1 and not (np.isfinite(radius) and radius > 0):
+        raise ValueError(_no_default_radius(v[finite]))
     if len(finite) > 1 and not (np.isfinite(radius) and radius > 0):
-        raise ValueError(f"radius must be a positive number of model units, got {radius}")
+        raise ValueError(f"radius must be a positive finite number of model units, got {radius}")
+    scale = power_of_two_scale(radius)
+    if scale != 1.0:
+        # squares of lengths this large (small) overflow (underflow) in float64; the estimator
+        # is scale-equivariant, and scaling by a power of two is exact
+        with np.errstate(over="ignore"):
+            res = principal_curvatures(
+                v * scale, f, given_normals, radius * scale, n_directions, neighborhood,
+                slab=slab, min_points=min_points, min_spread=min_spread, weighting=weighting,
+                circle_normalization=circle_normalization, section_blend=section_blend,
+                robust=robust, half_frequency=half_frequency,
+                normal_estimation=normal_estimation, refine_normals=refine_normals,
+                orientation=orientation if isinstance(orientation, str) else orientation * scale,
+                query=query, progress=progress)
+        with np.errstate(over="ignore"):
+            for name in ("k1", "k2", "residual"):
+                setattr(res, name, getattr(res, name) * scale)
+            res.noise = res.noise / scale
+        # curvatures of a subnormal-sized cloud may exceed float64: no estimate there
+        lost = res.valid & ~(np.isfinite(res.k1) & np.isfinite(res.k2))
+        for name in ("k1", "k2", "d1", "d2", "residual"):
+            getattr(res, name)[lost] = np.nan
+        res.valid &= ~lost
+        res.radius = radius
+        return res
 
     # 1. neighbourhoods: connected k-ring limited to the ball, or a ball query
     if use_kring:
@@ -423,9 +531,15 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
 
         def neighbours(idx):
             return kring_neighbors(v, adjacency, radius, idx, work)
+
+        def counts(idx):
+            return kring_counts(v, adjacency, radius, idx, work)
         kernel_points, rank = v, None
     else:
-        neighbours, kernel_points, rank = _ball_search(v, finite, radius)
+        neighbours, counts, kernel_points, rank = _ball_search(v, finite, radius)
+    # work per query from a sample: smaller blocks for large balls, an error for infeasible ones
+    block = _block_size(counts(query[_sample_queries(len(query))]), len(query), radius,
+                        "vertices" if f is not None else "points")
 
     # 2. normals: given, from the faces, or a PCA plane fit over each block's neighbourhood
     # (oriented by the faces or towards the viewpoint block by block; along a spanning tree in
@@ -449,7 +563,9 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
     refine = given_normals is None if refine_normals is None else bool(refine_normals)
 
     if tree_orient:
-        nv = _mst_normals(v, radius, neighbours, kernel_points, rank, progress)
+        block_all = _block_size(counts(finite[_sample_queries(len(finite))]), len(finite),
+                                radius, "points")
+        nv = _mst_normals(v, radius, neighbours, kernel_points, rank, progress, block_all)
 
     # 3-5. directional circle fits and the Euler fit, in the compiled kernel, block by block
     # in a spatially coherent order of the queries
@@ -463,14 +579,14 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
     residual = np.full(m, np.nan)
     n_neighbors = np.zeros(m, dtype=np.int32)
     noise = np.full(m, np.nan)
-    size = min(m, _BLOCK)
+    size = min(m, block)
     b_k1, b_k2, b_res, b_noise = (np.empty(size) for _ in range(4))
     b_d1, b_d2 = np.empty((size, 3)), np.empty((size, 3))
     b_samples, b_neighbours = np.empty(size), np.empty(size)
     # queries by grid cell for ball queries (the points a block touches then stay in cache);
     # as given for k-rings, whose memory accesses follow the mesh's own numbering
     order = len(query) if use_kring else spatial_order(v[query], radius)
-    for pos in _blocks(order, progress, "curvature"):
+    for pos in _blocks(order, progress, "curvature", block):
         idx = query[pos]
         xb = v[idx]
         b = len(idx)

@@ -30,6 +30,21 @@ PLANE_OFFSET = 0.25
 # Points per chunk handed to one thread (keeps scratch arrays per chunk, not per point).
 CHUNK = 256
 
+# Most planes through the normal (``ndir``) the estimator accepts. Each thread holds
+# 2 * ndir half-set accumulators and the robust step sorts the 2 * ndir circle fits by
+# insertion (quadratic); beyond 64 planes (2.8 degrees apart) the slabs of half-width
+# 0.25 radius overlap so much that more planes add no information.
+MAX_DIRECTIONS = 64
+
+# Fewest spread of the directions the circle fits measured for an estimate: the smaller
+# eigenvalue of the covariance of their (cos 2phi, sin 2phi) mixes (see ``_sample_design``)
+# over the samples kept. Measured: directions all around ~0.34 (sphere), mesh borders and
+# corners >= 0.15, the border of a random half-sphere cloud >= 0.027, the corners of a random
+# square patch 0.0069 .. 0.0095 (still accurate); neighbours along one curve (the rim of a
+# triangle fan) 0 .. 0.0018: there the Euler model's B and C are not determined, and k1, k2
+# would be noise (often exactly 0) marked valid.
+MIN_DIRECTION_SPREAD = 3e-3
+
 @njit(cache=True)
 def _smallest_eigvec_jacobi3(a, out):
     """Unit eigenvector of the smallest eigenvalue of the symmetric 3x3 ``a`` (overwritten).
@@ -289,16 +304,49 @@ def _model(rows, s, npar, sol):
 
 
 @njit(cache=True)
+def _direction_spread(mix, active, m):
+    """Smaller eigenvalue of the covariance of the active samples' direction mixes
+    ``mix[s] = (cos 2phi, sin 2phi)``: how far the measured directions span the Euler model."""
+    cnt = 0.0
+    mc = 0.0
+    ms = 0.0
+    for s in range(m):
+        if active[s] != 0.0:
+            cnt += 1.0
+            mc += mix[s, 0]
+            ms += mix[s, 1]
+    if cnt < 2.0:
+        return 0.0
+    mc /= cnt
+    ms /= cnt
+    a = 0.0
+    b = 0.0
+    c = 0.0
+    for s in range(m):
+        if active[s] != 0.0:
+            dc = mix[s, 0] - mc
+            ds = mix[s, 1] - ms
+            a += dc * dc
+            b += dc * ds
+            c += ds * ds
+    a /= cnt
+    b /= cnt
+    c /= cnt
+    return 0.5 * (a + c) - math.sqrt(0.25 * (a - c) * (a - c) + b * b)
+
+
+@njit(cache=True)
 def _estimate_one(points, nbr, lo, hi, x, n, radius, ndir, slab, min_points, min_spread,
                   beta, unit_norm, corrected, half_frequency, robust,
                   ca, sa, dirs, acc, kappa, rows, active, scratch, mat, rhs, sol, b3, ev, tu, tv,
-                  res, rank):
+                  res, rank, mix):
     """Circle fits in 2*ndir half-sets around one point, then the Euler model fit.
 
     Writes (k1, k2, theta1, n_used_samples, residual_rms, n_neighbours) into ``res`` (which
     the caller resets to NaN, NaN, NaN, 0, NaN, 0) and the frame into tu, tv. Lengths inside are in units of ``radius``. The points' weights are
     ``(1 - beta) + beta (1 - r^2)^WEIGHT_POWER``: equal weights at beta = 0, distance weights
-    at beta = 1.
+    at beta = 1. ``mix`` (2 ndir, 2) is scratch for the measured direction mix of each sample
+    (whatever ``corrected``): an estimate needs them spread by ``MIN_DIRECTION_SPREAD``.
     """
     nh = 2 * ndir
     for k in range(nh):
@@ -358,7 +406,10 @@ def _estimate_one(points, nbr, lo, hi, x, n, radius, ndir, slab, min_points, min
             if not np.isfinite(kap):
                 continue
             kappa[m] = kap
-            dc, ds = _sample_design(acc, k, corrected, dirs[k, 2], dirs[k, 3])
+            mc, ms = _sample_design(acc, k, True, dirs[k, 2], dirs[k, 3])
+            mix[m, 0] = mc
+            mix[m, 1] = ms
+            dc, ds = (mc, ms) if corrected else (dirs[k, 2], dirs[k, 3])
             rows[m, 0] = 1.0
             rows[m, 1] = dc
             rows[m, 2] = ds
@@ -400,6 +451,8 @@ def _estimate_one(points, nbr, lo, hi, x, n, radius, ndir, slab, min_points, min
         if active[s] != 0.0:
             used += 1
             sse += (kappa[s] - _model(rows, s, npar, sol)) ** 2
+    if _direction_spread(mix, active, m) < MIN_DIRECTION_SPREAD:
+        return
     amp = math.sqrt(sol[1] * sol[1] + sol[2] * sol[2])
     res[0] = (sol[0] + amp) * inv_r
     res[1] = (sol[0] - amp) * inv_r
@@ -468,6 +521,7 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
         res = np.empty(6)
         x = np.empty(3)
         n = np.empty(3)
+        mix = np.empty((nh, 2))
         for q in range(c * CHUNK, min(m, (c + 1) * CHUNK)):
             for a in range(3):
                 x[a] = query_points[q, a]
@@ -483,7 +537,7 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
                 _estimate_one(points, indices, indptr[q], indptr[q + 1], x, n, radius, ndir,
                               slab, min_points, min_spread, blend[q], unit_norm, corrected,
                               half_frequency, robust, ca, sa, dirs, acc, kappa, rows, active,
-                              scratch, mat, rhs, sol, b3, ev, tu, tv, res, rank)
+                              scratch, mat, rhs, sol, b3, ev, tu, tv, res, rank, mix)
             n_samples[q] = res[3]
             residual[q] = res[4]
             n_neighbors[q] = res[5]
@@ -784,6 +838,24 @@ def kring_ball_csr(adj_ptr, adj_idx, points, query, radius, stamp, queue, tag0):
 
 
 @njit(parallel=True, cache=True)
+def kring_counts(adj_ptr, adj_idx, points, query, radius, stamp, queue, tag0):
+    """(m,) int64 size of each query vertex's radius-limited k-ring (what
+    :func:`kring_ball_csr` would list, nothing stored: to size the work before doing it).
+    Work arrays and ``tag0`` as there."""
+    m = query.shape[0]
+    r2max = radius * radius
+    out = np.zeros(m, dtype=np.int64)
+    nthreads = max(1, min(m, stamp.shape[0]))
+    per = (m + nthreads - 1) // nthreads
+    dummy = np.empty(0, dtype=np.int32)
+    for t in prange(nthreads):
+        for qi in range(t * per, min(m, (t + 1) * per)):
+            out[qi] = _kring_one(adj_ptr, adj_idx, points, query[qi], 3 * (tag0 + qi), r2max,
+                                 stamp[t], queue[t], dummy, 0, 0)
+    return out
+
+
+@njit(parallel=True, cache=True)
 def pca_normals_csr(points, query_points, indptr, indices, radius):
     """Unit normals (m, 3) of the least-squares plane through each query point's neighbours.
 
@@ -856,6 +928,11 @@ def pca_normals_csr(points, query_points, indptr, indices, radius):
 # Cells of edge >= radius numbered x-major, z fastest: the three cells (ax, ay, cz-1..cz+1) of a
 # column are consecutive, so a ball query scans 9 contiguous runs of a copy of the points sorted
 # by cell, instead of 27 cells scattered through the input.
+#
+# Ball grids number their cells on one lattice, floor(coordinate / cell), whatever the points'
+# extent: a subset (a tile) gets the cells of the whole cloud, and a far-away point its own cell
+# without stretching anyone else's. Numbers are clamped to +-2**61 (points beyond share the
+# last cell), so any finite coordinate gives an int64 whose differences cannot overflow.
 
 
 @njit(cache=True)
@@ -886,7 +963,14 @@ def cell_grid_build(points, finite_index, origin, cell, dims):
         key = (cx * ny + cy) * nz + cz
         keys[j] = key
         cell_start[key + 1] += 1
-    for c in range(nx * ny * nz):
+    return _scatter_by_key(points, finite_index, keys, cell_start)
+
+
+@njit(cache=True)
+def _scatter_by_key(points, finite_index, keys, cell_start):
+    """Counting sort's second half: ``cell_start`` holds the counts of each key shifted by one."""
+    k = finite_index.shape[0]
+    for c in range(cell_start.shape[0] - 1):
         cell_start[c + 1] += cell_start[c]
     fill = cell_start[:-1].copy()
     order = np.empty(k, dtype=np.int64)
@@ -900,6 +984,55 @@ def cell_grid_build(points, finite_index, origin, cell, dims):
         sorted_points[pos, 1] = points[i, 1]
         sorted_points[pos, 2] = points[i, 2]
     return order, sorted_points, cell_start
+
+
+LATTICE_LIMIT = float(2 ** 61)
+
+
+@njit(cache=True)
+def _lattice_index(value, inv):
+    """Lattice cell number floor(value * inv), clamped to +-2**61 (NaN to the lower end)."""
+    c = value * inv
+    if not c > -LATTICE_LIMIT:
+        return np.int64(-LATTICE_LIMIT)
+    if c > LATTICE_LIMIT:
+        return np.int64(LATTICE_LIMIT)
+    return np.int64(math.floor(c))
+
+
+@njit(parallel=True, cache=True)
+def lattice_cells(points, finite_index, cell):
+    """(k, 3) int64 lattice cell numbers of ``points[finite_index]`` for cells of edge ``cell``."""
+    k = finite_index.shape[0]
+    inv = 1.0 / cell
+    out = np.empty((k, 3), dtype=np.int64)
+    for j in prange(k):
+        for a in range(3):
+            out[j, a] = _lattice_index(points[finite_index[j], a], inv)
+    return out
+
+
+@njit(cache=True)
+def dense_grid_build(points, finite_index, cells, base, dims):
+    """Counting sort of ``points[finite_index]`` by their lattice ``cells`` (from
+    :func:`lattice_cells`) into the dense block of ``dims`` cells starting at cell ``base``.
+
+    Returns ``(order, sorted_points, cell_start)`` as :func:`cell_grid_build`; cell
+    ``((cx - bx) * ny + cy - by) * nz + cz - bz`` holds positions ``cell_start[c]:cell_start[c + 1]``.
+    """
+    nx, ny, nz = dims[0], dims[1], dims[2]
+    k = finite_index.shape[0]
+    keys = np.empty(k, dtype=np.int64)
+    cell_start = np.zeros(nx * ny * nz + 1, dtype=np.int64)
+    for j in range(k):
+        # clamped only as a guard: the caller's block holds every cell
+        cx = min(max(cells[j, 0] - base[0], 0), nx - 1)
+        cy = min(max(cells[j, 1] - base[1], 0), ny - 1)
+        cz = min(max(cells[j, 2] - base[2], 0), nz - 1)
+        key = (cx * ny + cy) * nz + cz
+        keys[j] = key
+        cell_start[key + 1] += 1
+    return _scatter_by_key(points, finite_index, keys, cell_start)
 
 
 # Grid keys pack three cell coordinates modulo 2**21; a hash table maps keys to cells. Cells a
@@ -922,10 +1055,12 @@ def _hash_slot(key, mask):
 
 
 @njit(cache=True)
-def hashed_grid_build(points, finite_index, origin, cell):
-    """Uniform grid over ``points[finite_index]`` with cells of edge ``cell``.
+def hashed_grid_build(points, finite_index, cells):
+    """Uniform grid over ``points[finite_index]`` by their lattice ``cells`` (from
+    :func:`lattice_cells`), only the occupied cells stored: memory in the number of points
+    whatever the extent.
 
-    The sparse counterpart of :func:`cell_grid_build`, for extents where a dense grid would
+    The sparse counterpart of :func:`dense_grid_build`, for extents where a dense grid would
     hold too many empty cells. Returns ``(order, sorted_points, cell_start, table_keys,
     table_cells)``: ``order`` lists the point indices cell by cell (ascending within a cell),
     ``sorted_points`` their coordinates in that order, occupied cell ``c`` holds positions
@@ -934,13 +1069,8 @@ def hashed_grid_build(points, finite_index, origin, cell):
     """
     k = finite_index.shape[0]
     keys = np.empty(k, dtype=np.int64)
-    inv = 1.0 / cell
     for j in range(k):
-        i = finite_index[j]
-        cx = np.int64(math.floor((points[i, 0] - origin[0]) * inv))
-        cy = np.int64(math.floor((points[i, 1] - origin[1]) * inv))
-        cz = np.int64(math.floor((points[i, 2] - origin[2]) * inv))
-        keys[j] = _grid_key(cx, cy, cz)
+        keys[j] = _grid_key(cells[j, 0], cells[j, 1], cells[j, 2])
     srt = np.argsort(keys, kind="mergesort")  # stable: ascending point index within a cell
     order = finite_index[srt]
     sorted_points = np.empty((k, 3))
@@ -974,6 +1104,40 @@ def hashed_grid_build(points, finite_index, origin, cell):
     return order, sorted_points, cell_start, table_keys, table_cells
 
 
+# Most cell numbers one axis of a ball query visits (see _axis_window).
+WINDOW = 64
+
+
+@njit(cache=True)
+def _axis_window(x, cell, inv, out):
+    """Lattice cell numbers, ascending, of every float within ``cell`` of ``x`` along one axis;
+    their count.
+
+    The numbers of ``x - cell`` and ``x + cell`` bound them (rounding is monotone, so no float
+    between the two gets a number outside), and are adjacent to ``x``'s own but where
+    ``|x| / cell`` exceeds ~2**50 and rounding makes the numbers jump: there the few floats in
+    the window are enumerated, so that a query never visits more than a few cells.
+    """
+    lo = _lattice_index(x - cell, inv)
+    hi = _lattice_index(x + cell, inv)
+    if hi - lo <= 3:
+        for a in range(hi - lo + 1):
+            out[a] = lo + a
+        return hi - lo + 1
+    count = 0
+    p = x - cell
+    end = x + cell
+    for _ in range(out.shape[0]):
+        if not p <= end:
+            break
+        c = _lattice_index(p, inv)
+        if count == 0 or c != out[count - 1]:
+            out[count] = c
+            count += 1
+        p = np.nextafter(p, np.inf)
+    return count
+
+
 @njit(cache=True)
 def _scan_run(order, sorted_points, j0, j1, x0, x1, x2, r2max, out, base, found, limit,
               positions):
@@ -991,50 +1155,65 @@ def _scan_run(order, sorted_points, j0, j1, x0, x1, x2, r2max, out, base, found,
 
 
 @njit(cache=True)
-def _cell_ball_one(order, sorted_points, cell_start, origin, inv, dims, table_keys, table_cells,
-                   x0, x1, x2, r2max, out, base, limit, ascending, positions):
+def _cell_ball_one(order, sorted_points, cell_start, grid_base, cell, dims, table_keys,
+                   table_cells, x0, x1, x2, r2max, out, base, limit, ascending, positions, win):
     """Indices of the grid points within ``sqrt(r2max)`` of (x0, x1, x2).
 
-    Dense grid (``table_keys`` empty): the 27 cells around the query cell as 9 contiguous z
-    runs. Hashed grid: the same cells in the same order, each looked up by its key; both list
-    the same points in the same order. Writes to ``out[base:]`` as far as ``limit`` allows and
-    returns the count. With ``ascending`` (and if all fit) they are sorted, else in grid order.
-    With ``positions`` they are rows of ``sorted_points`` instead of point indices.
+    The cells of the query's window along each axis (:func:`_axis_window`; usually the 3 x 3 x 3
+    cells around the query's own), x-major and z fastest. Dense grid (``table_keys`` empty):
+    those within the block, contiguous z runs scanned at once. Hashed grid: each cell looked up
+    by its key. Both list the same points in the same order. Writes to ``out[base:]`` as far as
+    ``limit`` allows and returns the count. With ``ascending`` (and if all fit) they are sorted,
+    else in grid order. With ``positions`` they are rows of ``sorted_points`` instead of point
+    indices. ``win`` is (3, WINDOW) int64 scratch.
     """
     if not np.isfinite(x0 + x1 + x2):
         return 0
+    inv = 1.0 / cell
+    n0 = _axis_window(x0, cell, inv, win[0])
+    n1 = _axis_window(x1, cell, inv, win[1])
+    n2 = _axis_window(x2, cell, inv, win[2])
     found = 0
     if table_keys.shape[0] > 0:
         mask = table_keys.shape[0] - 1
-        cx = np.int64(math.floor((x0 - origin[0]) * inv))
-        cy = np.int64(math.floor((x1 - origin[1]) * inv))
-        cz = np.int64(math.floor((x2 - origin[2]) * inv))
-        for ax in range(cx - 1, cx + 2):
-            for ay in range(cy - 1, cy + 2):
-                for az in range(cz - 1, cz + 2):
-                    key = _grid_key(ax, ay, az)
+        for a in range(n0):
+            for b in range(n1):
+                for c in range(n2):
+                    key = _grid_key(win[0, a], win[1, b], win[2, c])
                     slot = _hash_slot(key, mask)
                     while table_keys[slot] != -1 and table_keys[slot] != key:
                         slot = (slot + 1) & mask
                     if table_keys[slot] == key:
-                        c = table_cells[slot]
-                        found = _scan_run(order, sorted_points, cell_start[c], cell_start[c + 1],
-                                          x0, x1, x2, r2max, out, base, found, limit, positions)
+                        cc = table_cells[slot]
+                        found = _scan_run(order, sorted_points, cell_start[cc],
+                                          cell_start[cc + 1], x0, x1, x2, r2max, out, base,
+                                          found, limit, positions)
     else:
         nx, ny, nz = dims[0], dims[1], dims[2]
-        cx = _cell_coord(x0, origin[0], inv, nx)
-        cy = _cell_coord(x1, origin[1], inv, ny)
-        cz = _cell_coord(x2, origin[2], inv, nz)
-        z0 = max(cz - 1, 0)
-        z1 = min(cz + 1, nz - 1)
-        if z0 > z1:
-            return 0
-        for ax in range(max(cx - 1, 0), min(cx + 2, nx)):
-            for ay in range(max(cy - 1, 0), min(cy + 2, ny)):
+        contiguous = win[2, n2 - 1] - win[2, 0] == n2 - 1
+        z0 = max(win[2, 0] - grid_base[2], 0)
+        z1 = min(win[2, n2 - 1] - grid_base[2], nz - 1)
+        for a in range(n0):
+            ax = win[0, a] - grid_base[0]
+            if ax < 0 or ax >= nx:
+                continue
+            for b in range(n1):
+                ay = win[1, b] - grid_base[1]
+                if ay < 0 or ay >= ny:
+                    continue
                 col = (ax * ny + ay) * nz
-                found = _scan_run(order, sorted_points, cell_start[col + z0],
-                                  cell_start[col + z1 + 1], x0, x1, x2, r2max, out, base, found,
-                                  limit, positions)
+                if contiguous:
+                    if z0 <= z1:
+                        found = _scan_run(order, sorted_points, cell_start[col + z0],
+                                          cell_start[col + z1 + 1], x0, x1, x2, r2max, out,
+                                          base, found, limit, positions)
+                    continue
+                for c in range(n2):
+                    az = win[2, c] - grid_base[2]
+                    if az >= 0 and az < nz:
+                        found = _scan_run(order, sorted_points, cell_start[col + az],
+                                          cell_start[col + az + 1], x0, x1, x2, r2max, out,
+                                          base, found, limit, positions)
     if ascending and base + found <= limit:
         _shell_sort(out, base, base + found)
     return found
@@ -1055,48 +1234,69 @@ def _shell_sort(a, lo, hi):
 
 
 @njit(parallel=True, cache=True)
-def cell_ball_csr(order, sorted_points, cell_start, origin, cell, dims, table_keys, table_cells,
-                  query_points, radius, nthreads, ascending, positions):
+def cell_ball_counts(order, sorted_points, cell_start, grid_base, cell, dims, table_keys,
+                     table_cells, query_points, radius):
+    """(m,) int64 number of grid points within ``radius`` of each query point (nothing
+    stored: what :func:`cell_ball_csr` would list, to size the work before doing it)."""
+    m = query_points.shape[0]
+    r2max = radius * radius
+    counts = np.zeros(m, dtype=np.int64)
+    dummy = np.empty(0, dtype=np.int64)
+    nchunks = (m + CHUNK - 1) // CHUNK
+    for ch in prange(nchunks):
+        win = np.empty((3, WINDOW), dtype=np.int64)
+        for q in range(ch * CHUNK, min(m, (ch + 1) * CHUNK)):
+            counts[q] = _cell_ball_one(order, sorted_points, cell_start, grid_base, cell, dims,
+                                       table_keys, table_cells, query_points[q, 0],
+                                       query_points[q, 1], query_points[q, 2], r2max, dummy, 0,
+                                       0, False, False, win)
+    return counts
+
+
+@njit(parallel=True, cache=True)
+def cell_ball_csr(order, sorted_points, cell_start, grid_base, cell, dims, table_keys,
+                  table_cells, query_points, radius, nthreads, ascending, positions):
     """All grid points within ``radius`` of each query point, CSR.
 
     Each list is ascending with ``ascending``, else in grid order (cheaper; for consumers that
     do not depend on the order). With ``positions`` the lists hold rows of ``sorted_points``
     (whose neighbourhoods then lie close together in memory) instead of point indices.
 
-    The grid comes from :func:`cell_grid_build` (``table_keys`` empty) or
-    :func:`hashed_grid_build` (``dims`` unused) with ``cell >= radius``. Each thread streams
-    its contiguous range of queries into its own slice of a scratch buffer sized from a sample
-    of the queries; a thread whose slice overflows searches its range again into the output.
+    The grid comes from :func:`dense_grid_build` (``table_keys`` empty; ``grid_base`` and
+    ``dims`` its block of cells) or :func:`hashed_grid_build` (``grid_base``, ``dims`` unused),
+    with ``cell >= radius``. Each thread streams its contiguous range of queries into its own
+    slice of a scratch buffer sized from a sample of the queries; a thread whose slice
+    overflows searches its range again into the output.
     """
     m = query_points.shape[0]
     r2max = radius * radius
-    inv = 1.0 / cell
     counts = np.zeros(m + 1, dtype=np.int64)
     nthreads = max(1, min(m, nthreads))
     per = (m + nthreads - 1) // nthreads
     dummy = np.empty(0, dtype=np.int64)
+    win0 = np.empty((3, WINDOW), dtype=np.int64)
     step = max(1, m // 64)
     tot = 0
     cnt = 0
     for qi in range(0, m, step):
-        tot += _cell_ball_one(order, sorted_points, cell_start, origin, inv, dims,
+        tot += _cell_ball_one(order, sorted_points, cell_start, grid_base, cell, dims,
                               table_keys, table_cells,
                               query_points[qi, 0], query_points[qi, 1], query_points[qi, 2],
-                              r2max, dummy, 0, 0, False, False)
+                              r2max, dummy, 0, 0, False, False, win0)
         cnt += 1
     cap = 16 + (3 * tot) // (2 * max(cnt, 1))
     buf = np.empty(nthreads * per * cap, dtype=np.int64)
     used = np.zeros(nthreads, dtype=np.int64)
     for t in prange(nthreads):
+        win = np.empty((3, WINDOW), dtype=np.int64)
         lo = t * per * cap
         limit = lo + per * cap
         pos = lo
         for qi in range(t * per, min(m, (t + 1) * per)):
-            f = _cell_ball_one(order, sorted_points, cell_start, origin, inv, dims,
+            f = _cell_ball_one(order, sorted_points, cell_start, grid_base, cell, dims,
                                table_keys, table_cells,
                                query_points[qi, 0], query_points[qi, 1], query_points[qi, 2],
-                               r2max, buf, pos, limit, ascending,
-                               positions)
+                               r2max, buf, pos, limit, ascending, positions, win)
             counts[qi + 1] = f
             pos += f
         used[t] = pos - lo
@@ -1114,12 +1314,13 @@ def cell_ball_csr(order, sorted_points, cell_start, origin, cell, dims, table_ke
             for j in range(used[t]):
                 indices[o + j] = buf[lo + j]
         else:
+            win = np.empty((3, WINDOW), dtype=np.int64)
             for qi in range(q0, q1):
-                _cell_ball_one(order, sorted_points, cell_start, origin, inv, dims,
+                _cell_ball_one(order, sorted_points, cell_start, grid_base, cell, dims,
                                table_keys, table_cells,
                                query_points[qi, 0], query_points[qi, 1], query_points[qi, 2],
                                r2max, indices, counts[qi], counts[qi + 1],
-                               ascending, positions)
+                               ascending, positions, win)
     return counts, indices
 
 

@@ -124,9 +124,17 @@ def orient_mst(points, normals, k=10, neighbors=None):
     span = np.maximum(np.ptp(p, axis=0), 1e-300)
     s1, s2, s3 = np.sort(span)[::-1]
     # about one point per cell for volumes, a few per occupied cell for surfaces
-    cell = max(2.0 * np.sqrt(s1 * s2 / len(p)), np.cbrt(s1 * s2 * s3 / len(p)), 1e-300)
-    dims = np.floor(span / cell).astype(np.int64) + 3
-    order = kernels.cell_grid_build(p, np.arange(len(p)), p.min(axis=0) - cell, cell, dims)[0]
+    with np.errstate(over="ignore"):
+        cell = max(2.0 * np.sqrt(s1 * s2 / len(p)), np.cbrt(s1 * s2 * s3 / len(p)), 1e-300)
+    dims = np.floor(span / cell) + 3
+    if np.isfinite(cell) and float(np.prod(dims)) <= 4.0 * len(p) + 2.0 ** 20:
+        order = kernels.cell_grid_build(p, np.arange(len(p)), p.min(axis=0) - cell, cell,
+                                        dims.astype(np.int64))[0]
+    else:
+        # far outliers stretch the extent: lattice cells, hashed (memory bounded by n)
+        from .neighborhoods import spatial_order
+
+        order = spatial_order(p, cell)
     rank = np.empty(len(p) + 1, dtype=np.int32)
     rank[order] = np.arange(len(p), dtype=np.int32)
     rank[-1] = -1                          # "no neighbour" stays -1 (index -1 wraps to it)

@@ -8,7 +8,7 @@ Slow and readable: the paper's steps for a single point, built from :mod:`meshcu
 import numpy as np
 
 from .cga import fit_normal_circle
-from .kernels import PLANE_OFFSET, WEIGHT_POWER
+from .kernels import MIN_DIRECTION_SPREAD, PLANE_OFFSET, WEIGHT_POWER
 from .sinefit import fit_euler
 
 __all__ = ["curvature_at_point", "local_jet"]
@@ -62,7 +62,7 @@ def curvature_at_point(x, n, neighbours, radius, n_directions=8, slab=0.25, min_
     phi = np.arctan2(v, u)
     w = (1 - blend) + blend * (1 - r2) ** WEIGHT_POWER
 
-    kappas, rows, planes = [], [], set()
+    kappas, rows, mixes, planes = [], [], [], set()
     for i in range(n_directions):
         alpha = (i + PLANE_OFFSET) * np.pi / n_directions
         dist = -np.sin(alpha) * u + np.cos(alpha) * v    # distance to plane i (through x)
@@ -77,17 +77,19 @@ def curvature_at_point(x, n, neighbours, radius, n_directions=8, slab=0.25, min_
             if not np.isfinite(kappa):
                 continue
             theta = alpha + side * np.pi
-            if section_blend:
-                # the blend of directions this half-set measured (see kernels._sample_design)
-                rr = np.concatenate([[0.0], r2[half]])
-                wp = wt * rr * (rr - np.sum(wt * rr) / wt.sum())
-                c = np.sum(wp[1:] * np.cos(2 * phi[half])) / wp.sum()
-                s = np.sum(wp[1:] * np.sin(2 * phi[half])) / wp.sum()
+            # the blend of directions this half-set measured (see kernels._sample_design)
+            rr = np.concatenate([[0.0], r2[half]])
+            wp = wt * rr * (rr - np.sum(wt * rr) / wt.sum())
+            if wp.sum() > 0:
+                mix = (np.sum(wp[1:] * np.cos(2 * phi[half])) / wp.sum(),
+                       np.sum(wp[1:] * np.sin(2 * phi[half])) / wp.sum())
             else:
-                c, s = np.cos(2 * theta), np.sin(2 * theta)
+                mix = (np.cos(2 * theta), np.sin(2 * theta))
+            c, s = mix if section_blend else (np.cos(2 * theta), np.sin(2 * theta))
             row = [1.0, c, s] + ([np.cos(theta), np.sin(theta)] if half_frequency else [])
             kappas.append(kappa)
             rows.append(row)
+            mixes.append(mix)
             planes.add(i)
     out = dict(k1=np.nan, k2=np.nan, d1=np.full(3, np.nan), n_samples=len(kappas),
                residual=np.nan)
@@ -95,6 +97,9 @@ def curvature_at_point(x, n, neighbours, radius, n_directions=8, slab=0.25, min_
         return out
     k1, k2, theta1, rms, used = fit_euler(np.array(rows), np.array(kappas), robust=robust)
     if not np.isfinite(k1):
+        return out
+    # the measured directions must span the Euler model (not all along one curve)
+    if np.linalg.eigvalsh(np.cov(np.array(mixes)[used].T, bias=True))[0] < MIN_DIRECTION_SPREAD:
         return out
     out.update(k1=k1 / radius, k2=k2 / radius, d1=np.cos(theta1) * tu + np.sin(theta1) * tv,
                n_samples=int(used.sum()), residual=rms / radius)

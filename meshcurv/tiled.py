@@ -5,12 +5,10 @@ task gets the tile's own points plus every point within the halo (``>= radius``,
 PCA-normal radius) of the tile, in input order, and estimates curvature at its own points only
 (``principal_curvatures(..., query=own)``). The neighbour lists of the own points then hold the
 same points as in a whole-cloud run, so a tile's values are those of the untiled run with the
-same normals - bit for bit as long as the neighbour search lists each ball in an order that does
-not depend on far-away points (e.g. on where the bounding box of the cloud starts). The grid's
-cell walls lie on multiples of the cell size, but a point exactly on a wall (z = 0 in a quantized
-LAS file) is binned by the rounding of its offset from the grid's first cell, which depends on
-the points present; its neighbours may then be summed in another order, and its values differ
-by rounding (measured: up to 1e-14 in curvature, 1e-12 in the directions).
+same normals, bit for bit: the neighbour search bins points into cells counted from 0 in
+model units (``floor(x / cell)``), not from the corner of the points present, so a point exactly on
+a cell wall (z = 0 in a quantized LAS file) falls in the same cell in a tile as in the whole cloud
+and every ball is listed, and summed, in the same order.
 
 Pipeline, every stage resumable from a work folder (``OUT.meshcurv-work`` next to the output):
 
@@ -916,7 +914,7 @@ def principal_curvatures_tiled(vertices, radius, tile_size, normals=None, *, ori
     The driver cuts the cloud into tile + halo pieces in a work folder (which workers must see);
     each task loads one tile + halo only. With given normals or a viewpoint ``orientation`` the
     result equals ``principal_curvatures(vertices, normals=..., radius=radius, orientation=...)``
-    to rounding (bit for bit but at points exactly on a neighbour-grid wall; module docstring).
+    bit for bit (module docstring).
 
     Parameters
     ----------

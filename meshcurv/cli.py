@@ -107,8 +107,9 @@ def _check_options(options):
             raise ValueError(f"--quality must be one of {', '.join(shape.FIELDS)}")
         if options.colormap.lower() not in (c.lower() for c in shape.COLORMAPS):
             raise ValueError(f"--colormap must be one of {', '.join(shape.COLORMAPS)}")
-        if int(options.directions) < 3:
-            raise ValueError("--directions must be at least 3")
+        from .estimator import check_options
+
+        check_options(n_directions=options.directions, neighborhood=options.neighborhood)
     except ValueError as exc:
         raise CommandError(str(exc), 2) from None
 
@@ -137,7 +138,7 @@ def annotate_file(input_path, output_path, options=AnnotateOptions(), preview=No
     Raises :class:`meshcurv.io.MeshFileError` or ValueError (message names the file) for bad
     input; no output file is left behind then.
     """
-    from .estimator import principal_curvatures
+    from .estimator import no_estimate_reason, principal_curvatures
 
     t0 = time.perf_counter()
     io.check_distinct(input_path, output_path)
@@ -161,8 +162,8 @@ def annotate_file(input_path, output_path, options=AnnotateOptions(), preview=No
     n_valid = int(result.valid.sum())
     if n_valid == 0:
         raise io.MeshFileError(f"{input_path}: no vertex got a curvature estimate "
-                               f"({len(data.vertices)} vertices, radius {result.radius:.6g}); "
-                               "try a larger --radius")
+                               f"({len(data.vertices)} vertices): "
+                               f"{no_estimate_reason(result, n_finite, '--radius')}")
     io.write(output_path, data, result, quality=options.quality, colormap=options.colormap)
     if preview is not None:
         try:

@@ -70,11 +70,22 @@ def _open(path):
     if not _is_las(path):
         raise ValueError(f"{path}: expected a .las or .laz file")
     try:
-        return laspy.open(os.fspath(path))
+        reader = laspy.open(os.fspath(path))
     except FileNotFoundError:
         raise
     except Exception as e:  # laspy/lazrs raise a variety of types for bad headers
         raise LasReadError(f"{path}: not a readable LAS/LAZ file ({type(e).__name__}: {e})") from e
+    header = reader.header
+    if not header.are_points_compressed:
+        # laspy allocates what the header declares: check it against the file before reading
+        need = header.offset_to_point_data + header.point_count * header.point_format.size
+        size = os.path.getsize(path)
+        if need > size:
+            reader.close()
+            raise LasReadError(f"{path}: the header declares {header.point_count} points "
+                               f"({need} bytes), but the file has {size} bytes (truncated or "
+                               "corrupt)")
+    return reader
 
 
 def _normal_dims(point_format):

@@ -116,7 +116,7 @@ def _worker(inp, out):
     np.savez(out, k1=k1, k2=k2, seconds=np.mean(seconds))
 
 
-def run_meshlab(method, vertices, faces, radius, normals=None, timeout=300.0, retries=1):
+def run_meshlab(method, vertices, faces, radius, normals=None, timeout=300.0, retries=3):
     """Run one MeshLab method in a child process.
 
     Parameters

@@ -15,8 +15,8 @@ __version__ = "0.1.0"
 
 # The names above and the submodule ``surfaces`` load on first use (PEP 562), so that
 # ``meshcurv --help`` and ``meshcurv info`` do not import numba, scipy and trimesh.
-_LAZY = {"CurvatureResult": "estimator", "principal_curvatures": "estimator",
-         "estimate_normals": "estimator", "default_radius": "neighborhoods",
+_LAZY = {"CurvatureResult": "result", "principal_curvatures": "api",
+         "estimate_normals": "api", "default_radius": "neighbors",
          "surfaces": None}
 
 

@@ -163,7 +163,7 @@ def auto_radius(vertices, faces=None, normals=None, *, weighting="none", min_poi
     >>> bool(0.6 < r <= 0.7)      # no bias on a sphere: the largest ball, 0.7 / kappa
     True
     """
-    from .estimator import principal_curvatures
+    from .api import principal_curvatures
 
     if hasattr(vertices, "vertices") and hasattr(vertices, "faces"):
         faces = vertices.faces if faces is None else faces
@@ -176,7 +176,7 @@ def auto_radius(vertices, faces=None, normals=None, *, weighting="none", min_poi
     if weighting not in NOISE_GAIN:
         raise ValueError(f"weighting must be one of {sorted(NOISE_GAIN)}, got {weighting!r}")
     gain = NOISE_GAIN[weighting]
-    from .neighborhoods import power_of_two_scale, typical_extent
+    from .neighbors import power_of_two_scale, typical_extent
 
     s = power_of_two_scale(typical_extent(v, sample, seed))
     if s != 1.0:
@@ -197,7 +197,7 @@ def auto_radius(vertices, faces=None, normals=None, *, weighting="none", min_poi
                       if finite.sum() >= 24 else (np.nan, np.nan))
     if not (np.isfinite(density) and density > 0 and np.isfinite(sigma)):
         # too few (distinct) points for the noise estimate: the sampling-only default
-        from .neighborhoods import default_radius
+        from .neighbors import default_radius
 
         radius = default_radius(v)
         return (radius, dict(density=np.nan, sigma=np.nan, kappa=np.nan, beta=np.nan,

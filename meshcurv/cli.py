@@ -107,7 +107,7 @@ def _check_options(options):
             raise ValueError(f"--quality must be one of {', '.join(shape.FIELDS)}")
         if options.colormap.lower() not in (c.lower() for c in shape.COLORMAPS):
             raise ValueError(f"--colormap must be one of {', '.join(shape.COLORMAPS)}")
-        from .estimator import check_options
+        from .options import check_options
 
         check_options(n_directions=options.directions, neighborhood=options.neighborhood)
     except ValueError as exc:
@@ -138,7 +138,7 @@ def annotate_file(input_path, output_path, options=AnnotateOptions(), preview=No
     Raises :class:`meshcurv.io.MeshFileError` or ValueError (message names the file) for bad
     input; no output file is left behind then.
     """
-    from .estimator import no_estimate_reason, principal_curvatures
+    from .api import no_estimate_reason, principal_curvatures
 
     t0 = time.perf_counter()
     io.check_distinct(input_path, output_path)

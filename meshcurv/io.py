@@ -38,14 +38,13 @@ from dataclasses import dataclass, field as dc_field
 import numpy as np
 
 from . import shape
+from .result import CURVATURE_FIELDS, curvature_fields
 
 __all__ = ["MeshData", "MeshFileError", "READERS", "WRITERS", "register_reader",
            "register_writer", "read", "write", "write_ply", "write_annotated", "atomic_write",
-           "check_distinct", "bbox_diagonal", "CURVATURE_FIELDS", "ANNOTATED_FIELDS",
-           "curvature_fields", "PLY_PREFIX", "ply_property", "ply_field_names"]
+           "check_distinct", "bbox_diagonal", "ANNOTATED_FIELDS",
+           "PLY_PREFIX", "ply_property", "ply_field_names"]
 
-# Per-vertex curvature fields of every annotated file (PLY properties, LAS extra bytes).
-CURVATURE_FIELDS = shape.FIELDS + ("valid", "d1x", "d1y", "d1z", "d2x", "d2y", "d2z")
 # Vertex properties of an annotated PLY, besides geometry and colour, in file order.
 ANNOTATED_FIELDS = CURVATURE_FIELDS + ("n_neighbors", "n_samples", "residual", "quality")
 _GEOMETRY = ("x", "y", "z", "nx", "ny", "nz")
@@ -820,19 +819,6 @@ def write_ply(path, vertices, faces=None, fields=None):
     atomic_write(path, ply.write)
 
 
-def curvature_fields(result):
-    """The :data:`CURVATURE_FIELDS` of a :class:`~meshcurv.CurvatureResult`, in that order, as
-    ``{name: (n,) array}``: float64, ``valid`` uint8 (1 = estimated), ``d1x .. d2z`` the
-    components of the principal directions."""
-    out = {f: np.asarray(getattr(result, f), dtype=np.float64) for f in shape.FIELDS}
-    out["valid"] = np.asarray(result.valid, dtype=np.uint8)
-    for name in ("d1", "d2"):
-        arr = getattr(result, name)
-        for a, c in enumerate("xyz"):
-            out[name + c] = arr[:, a]
-    return out
-
-
 def write_annotated(path, data, result, quality="mean", colormap="Turbo", clamp=2.0):
     """Write ``data`` with the curvature ``result`` as an annotated binary PLY (atomic).
 
@@ -882,7 +868,7 @@ def write_las(path, data, result, quality=None, colormap=None, clamp=None):
     """Write the LAS/LAZ input of ``data`` with the curvature ``result`` to ``path`` (atomic).
 
     Every point record of the input is copied unchanged and the fields of
-    :data:`meshcurv.las.CURVATURE_FIELDS` (float64, ``valid`` uint8) are added as named
+    :data:`meshcurv.result.CURVATURE_FIELDS` (float64, ``valid`` uint8) are added as named
     extra-bytes dimensions, plus NormalX..NormalZ when the input has no normals; see
     :mod:`meshcurv.las`. ``.laz`` output is compressed. LAS has no colour ramp or quality
     property, so ``quality``, ``colormap`` and ``clamp`` are accepted and ignored.

@@ -30,12 +30,6 @@ PLANE_OFFSET = 0.25
 # Points per chunk handed to one thread (keeps scratch arrays per chunk, not per point).
 CHUNK = 256
 
-# Most planes through the normal (``ndir``) the estimator accepts. Each thread holds
-# 2 * ndir half-set accumulators and the robust step sorts the 2 * ndir circle fits by
-# insertion (quadratic); beyond 64 planes (2.8 degrees apart) the slabs of half-width
-# 0.25 radius overlap so much that more planes add no information.
-MAX_DIRECTIONS = 64
-
 # Fewest spread of the directions the circle fits measured for an estimate: the smaller
 # eigenvalue of the covariance of their (cos 2phi, sin 2phi) mixes (see ``_sample_design``)
 # over the samples kept. Measured: directions all around ~0.34 (sphere), mesh borders and

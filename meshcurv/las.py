@@ -36,7 +36,8 @@ import os
 
 import numpy as np
 
-from .io import CURVATURE_FIELDS, atomic_write, check_distinct, curvature_fields
+from .io import atomic_write, check_distinct
+from .result import CURVATURE_FIELDS, curvature_fields
 
 __all__ = ["LasReadError", "CURVATURE_FIELDS", "NORMAL_FIELDS", "las_point_count",
            "iter_las_chunks", "read_las_points", "read_las_cloud", "result_fields",

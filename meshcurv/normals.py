@@ -132,7 +132,7 @@ def orient_mst(points, normals, k=10, neighbors=None):
                                         dims.astype(np.int64))[0]
     else:
         # far outliers stretch the extent: lattice cells, hashed (memory bounded by n)
-        from .neighborhoods import spatial_order
+        from .neighbors import spatial_order
 
         order = spatial_order(p, cell)
     rank = np.empty(len(p) + 1, dtype=np.int32)

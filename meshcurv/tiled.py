@@ -268,7 +268,7 @@ def _prepare_worker(threads):
     (from numba's cache) on a tiny cloud, so that a tile task's memory is the tile's alone."""
     import numba
 
-    from .estimator import estimate_normals, principal_curvatures
+    from .api import estimate_normals, principal_curvatures
 
     if threads:
         numba.set_num_threads(min(int(threads), numba.config.NUMBA_NUM_THREADS))
@@ -359,7 +359,7 @@ def _normals_task(name, work, chunk_ids, radius, grid, in_path, threads=None,
     between tiles: ``band_idx, band_normals`` (own points within the halo width of the tile's
     border) and ``halo_idx, halo_normals, halo_owner`` (the halo points, their tile).
     """
-    from .estimator import estimate_normals
+    from .api import estimate_normals
 
     t0 = time.perf_counter()
     try:
@@ -470,7 +470,7 @@ def _curvature_task(name, work, chunk_ids, radius, orientation, options, in_path
     refined as the estimator refines its own estimated normals (``refine_normals=True`` unless
     the options say otherwise).
     """
-    from .estimator import principal_curvatures
+    from .api import principal_curvatures
 
     t0 = time.perf_counter()
     try:
@@ -528,7 +528,7 @@ def _gather(work, tiles, chunk_id, first, count):
 
 
 def _as_result(arrays, radius):
-    from .estimator import CurvatureResult
+    from .result import CurvatureResult
 
     return CurvatureResult(radius=float(radius), **arrays)
 
@@ -691,7 +691,7 @@ def _options_manifest(radius, grid, orientation, options, chunk_size):
 def _check_options(orientation, options):
     """Reject estimator options the tiled run cannot take, before any work starts; returns
     ``orientation`` as "mst" or a tuple (sent to every task)."""
-    from .estimator import check_options
+    from .options import check_options
 
     reserved = sorted(set(options) & set(_RESERVED))
     if reserved:
@@ -840,7 +840,7 @@ def annotate_tiled(in_path, out_path, radius=None, tile_size=None, *, orientatio
         raise ValueError(f"tiled runs need a radius in model units or None, got {radius!r} "
                          "(a data-driven radius needs the whole cloud)")
     if radius is None:
-        from .neighborhoods import default_radius
+        from .neighbors import default_radius
 
         first = next(las.iter_las_chunks(in_path, chunk_size, stop=chunk_size), None)
         radius = default_radius(first[1]) if first is not None else float("nan")

@@ -1,7 +1,7 @@
 """Speed of meshcurv against MeshLab's curvature filters, measured in the same run.
 
 Data: a torus and a sphere mesh at 100k and 1M vertices, and a 1M-point cloud (uniform random
-points on a torus, no faces). Radius: :func:`meshcurv.neighborhoods.default_radius`, the ball
+points on a torus, no faces). Radius: :func:`meshcurv.neighbors.default_radius`, the ball
 holding about 100 points. Methods:
 
 - ``meshcurv``: exact normals given; ``meshcurv (est.)``: normals estimated by PCA over the
@@ -330,7 +330,7 @@ def stage_times(v, f, normals, radius):
 
 def run(quick=False, repeat=3, apss_timeout=900.0, methods=None, stages=True, data=None):
     """Run the benchmark; returns a dict with ``rows`` (one per data set and method) and more."""
-    from meshcurv.neighborhoods import default_radius
+    from meshcurv.neighbors import default_radius
 
     import meshcurv
     import numba

@@ -18,10 +18,10 @@ pymeshlab = pytest.importorskip("pymeshlab")
 
 import meshcurv  # noqa: E402
 import meshcurv.filters  # noqa: E402,F401  (registers the filter on MeshSet)
-from meshcurv import cli, io, shape, surfaces  # noqa: E402
+from meshcurv import cli, io, result, shape, surfaces  # noqa: E402
 
 # every per-vertex field of an annotated file besides geometry, normals, quality and colour
-FIELDS = io.CURVATURE_FIELDS + ("n_neighbors", "n_samples", "residual")
+FIELDS = result.CURVATURE_FIELDS + ("n_neighbors", "n_samples", "residual")
 # the fields the pymeshlab filter leaves on a mesh (valid as 0/1, d1 d2 as point attributes)
 FILTER_SCALARS = shape.FIELDS + ("valid",)
 
@@ -47,7 +47,7 @@ def _annotate(path, vertices, faces=None, quality="mean"):
 
 def _expected(res):
     """The annotated fields of ``res`` by field name, as written (float64, uint8, int32)."""
-    out = io.curvature_fields(res)
+    out = result.curvature_fields(res)
     out["n_neighbors"] = np.asarray(res.n_neighbors, dtype=np.int32)
     out["n_samples"] = np.asarray(res.n_samples, dtype=np.int32)
     out["residual"] = np.asarray(res.residual, dtype=np.float64)
@@ -291,7 +291,7 @@ def test_cloudcompare_loads_the_fields_of_save_curvature_mesh(tmp_path, torus):
     path = tmp_path / "filtered.ply"
     meshcurv.filters.save_curvature_mesh(ms, str(path))
     loaded = _cloudcompare_scalar_fields(path, True, tmp_path)
-    assert list(loaded) == list(io.CURVATURE_FIELDS)
+    assert list(loaded) == list(result.CURVATURE_FIELDS)
     k1 = ms.current_mesh().vertex_custom_scalar_attribute_array("k1")
     assert _bits(loaded["k1"]) == _bits(k1.astype(np.float32))
 

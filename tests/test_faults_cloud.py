@@ -14,8 +14,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import meshcurv
-from meshcurv import estimator, kernels, normals, reference
-from meshcurv.neighborhoods import ball_grid, ball_neighbors, default_radius, spatial_order
+from meshcurv import api, kernels, normals, options, reference
+from meshcurv.neighbors import ball_grid, ball_neighbors, default_radius, spatial_order
 
 # icosphere(3): 642 vertices; its own default radius, given explicitly to both runs
 SPHERE = trimesh.creation.icosphere(3)
@@ -189,21 +189,21 @@ def test_a_radius_far_too_large_is_computed_and_explained():
     p = _with((1e30, 0, 0))
     res = meshcurv.principal_curvatures(p, radius=2e28)         # 2 % of the diagonal
     assert not res.valid.any()
-    why = estimator.no_estimate_reason(res, len(p))
+    why = api.no_estimate_reason(res, len(p))
     assert "far too large" in why and "smaller" in why and "\n" not in why
     small = meshcurv.principal_curvatures(SPHERE.vertices, radius=0.05)
-    assert "too small" in estimator.no_estimate_reason(small, len(SPHERE.vertices))
+    assert "too small" in api.no_estimate_reason(small, len(SPHERE.vertices))
 
 
 def test_an_infeasible_radius_is_refused_in_one_line(monkeypatch):
-    monkeypatch.setattr(estimator, "MAX_PAIRS", 1e5)
+    monkeypatch.setattr(api, "MAX_PAIRS", 1e5)
     with pytest.raises(ValueError, match="too large for these points") as exc:
         meshcurv.principal_curvatures(SPHERE.vertices, radius=10.0)
     assert "\n" not in str(exc.value) and "smaller radius" in str(exc.value)
 
 
 def test_large_balls_are_computed_in_smaller_blocks(monkeypatch, alone):
-    monkeypatch.setattr(estimator, "_BLOCK_ENTRIES", 2000)         # ~30 queries per block
+    monkeypatch.setattr(api, "_BLOCK_ENTRIES", 2000)         # ~30 queries per block
     res = meshcurv.principal_curvatures(SPHERE.vertices, radius=RADIUS)
     assert np.array_equal(res.k1, alone["given"].k1)
 
@@ -243,15 +243,15 @@ def test_reference_refuses_a_fan_rim_as_the_kernel_does():
 @pytest.mark.parametrize("bad", [2, 65, 100000, 8.5, "x", None, float("nan")])
 def test_n_directions_out_of_range_is_refused_in_one_line(bad):
     with pytest.raises(ValueError, match="n_directions must be a whole number from 3 to 64"):
-        estimator.check_options(n_directions=bad)
+        options.check_options(n_directions=bad)
 
 
 def test_n_directions_at_the_bounds_is_accepted():
     for ok in (3, 64, 8.0, np.int64(16)):
-        estimator.check_options(n_directions=ok)
+        options.check_options(n_directions=ok)
     res = meshcurv.principal_curvatures(SPHERE.vertices, radius=RADIUS, n_directions=64)
     assert res.valid.mean() > 0.9
-    assert kernels.MAX_DIRECTIONS == 64
+    assert options.MAX_DIRECTIONS == 64
 
 
 def test_cli_refuses_100000_directions_in_one_line(tmp_path):

@@ -126,7 +126,7 @@ def _no_computation(*args, **kwargs):
 def test_annotated_laz_is_refused_before_computing(annotated, tmp_path, capsys, monkeypatch):
     path, _ = annotated
     out = str(tmp_path / "twice.laz")
-    monkeypatch.setattr(meshcurv.estimator, "principal_curvatures", _no_computation)
+    monkeypatch.setattr(meshcurv.api, "principal_curvatures", _no_computation)
     assert cli.main(["annotate", path, "-o", out, "--radius", "2"]) == 1
     err = [ln for ln in capsys.readouterr().err.splitlines() if "compiling" not in ln]
     assert err == [f"meshcurv: error: {path} already has dimension(s) k1, k2, mean and 10 more "

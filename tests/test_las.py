@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import meshcurv
-from meshcurv import las
+from meshcurv import las, result
 
 VIEWPOINT = (20.0, 20.0, 500.0)
 
@@ -96,7 +96,7 @@ def test_curvature_fields_round_trip_by_name_and_input_dims_unchanged(las_file, 
     np.testing.assert_array_equal(src.header.offsets, got.header.offsets)
     assert got.header.point_format.id == src.header.point_format.id
     assert list(got.point_format.extra_dimension_names) == (
-        ["reflectance"] + list(las.CURVATURE_FIELDS) + list(las.NORMAL_FIELDS))
+        ["reflectance"] + list(result.CURVATURE_FIELDS) + list(las.NORMAL_FIELDS))
     assert not [f for f in os.listdir(tmp_path) if f.endswith(".part")]
 
 
@@ -122,7 +122,7 @@ def test_normals_in_the_input_are_read_and_not_written_again(tmp_path):
     las.write_las_curvature(path, out, res)
     names = list(laspy.read(out).point_format.extra_dimension_names)
     assert names.count("NormalX") == 1
-    assert names[-len(las.CURVATURE_FIELDS):] == list(las.CURVATURE_FIELDS)
+    assert names[-len(result.CURVATURE_FIELDS):] == list(result.CURVATURE_FIELDS)
 
 
 def test_truncated_laz_is_named_and_leaves_no_output(las_file, tmp_path):

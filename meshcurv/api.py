@@ -2,20 +2,19 @@
 -> Euler (sine) fit -> outputs.
 """
 
-import inspect
-from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
 from tqdm.auto import tqdm
 
-from . import kernels, normals as nrm, shape
-from .neighborhoods import (BallGrid, KringWork, ball_counts, ball_grid, ball_neighbors,
-                            default_radius, edge_adjacency, kring_counts, kring_neighbors,
+from . import kernels, normals as nrm
+from .options import check_options
+from .result import CurvatureResult
+from .neighbors import (BallGrid, KringWork, ball_counts, ball_grid, ball_neighbors,
+                        default_radius, edge_adjacency, kring_counts, kring_neighbors,
                             power_of_two_scale, spatial_order)
 
-__all__ = ["CurvatureResult", "principal_curvatures", "estimate_normals", "check_options",
-           "no_estimate_reason"]
+__all__ = ["principal_curvatures", "estimate_normals", "no_estimate_reason"]
 
 # Query points per call into the kernels: bounds the memory of the neighbour lists (about
 # 0.8 kB per query point at 100 neighbours) at no measurable cost in speed.
@@ -64,61 +63,6 @@ def weight_blend(noise, radius, weighting="auto"):
 
 # Neighbours per point in the graph of the spanning-tree orientation.
 _TREE_NEIGHBOURS = 10
-
-
-@dataclass
-class CurvatureResult:
-    """Per-vertex principal curvatures; one row per input vertex (or query point), input order.
-
-    Attributes
-    ----------
-    k1, k2 : (n,) float64, principal curvatures, 1 / model units, ``k1 >= k2``, convex positive
-        under the outward normal; NaN where ``valid`` is False
-    d1, d2 : (n, 3) float64, unit principal directions; ``(d1, d2, normals)`` is right-handed
-    normals : (n, 3) float64, the unit normals used (given, from faces, or estimated)
-    valid : (n,) bool
-    n_neighbors : (n,) int32, neighbours within the radius
-    n_samples : (n,) int32, circle fits used in the Euler fit (at most ``2 * n_directions``)
-    residual : (n,) float64, RMS residual of the Euler fit, 1 / model units
-    noise : (n,) float64, RMS height residual of a local cubic fit over the neighbourhood,
-        model units: an estimate of the noise along the normal (NaN with fewer than 11 points)
-    radius : float, the neighbourhood radius used, model units
-    """
-
-    k1: np.ndarray
-    k2: np.ndarray
-    d1: np.ndarray
-    d2: np.ndarray
-    normals: np.ndarray
-    valid: np.ndarray
-    n_neighbors: np.ndarray
-    n_samples: np.ndarray
-    residual: np.ndarray
-    noise: np.ndarray
-    radius: float
-
-    @property
-    def mean(self):
-        """Mean curvature (k1 + k2) / 2, (n,)."""
-        return shape.mean_curvature(self.k1, self.k2)
-
-    @property
-    def gaussian(self):
-        """Gaussian curvature k1 * k2, (n,)."""
-        return shape.gaussian_curvature(self.k1, self.k2)
-
-    @property
-    def shape_index(self):
-        """Shape index in [-1, 1], +1 for a convex cap, (n,)."""
-        return shape.shape_index(self.k1, self.k2)
-
-    @property
-    def curvedness(self):
-        """Curvedness sqrt((k1^2 + k2^2) / 2), (n,)."""
-        return shape.curvedness(self.k1, self.k2)
-
-    def __len__(self):
-        return len(self.k1)
 
 
 def _as_arrays(vertices, faces, normals):
@@ -311,45 +255,6 @@ def no_estimate_reason(result, n_points, option="radius"):
             f"or coincident); try another {option}")
 
 
-def check_options(**options):
-    """Check option names and values of :func:`principal_curvatures` without running it.
-
-    Raises ValueError for an unknown name or a value out of its set; returns ``orientation``
-    ("mst" or a (3,) float64 viewpoint).
-    """
-    try:
-        inspect.signature(principal_curvatures).bind_partial(**options)
-    except TypeError as exc:
-        raise ValueError(f"unknown estimator option: {exc}") from None
-    choices = {"neighborhood": ("auto", "kring", "ball"),
-               "normal_estimation": ("auto", "faces", "pca"),
-               "weighting": ("auto", "distance", "none"),
-               "circle_normalization": ("tangent", "unit")}
-    for name, allowed in choices.items():
-        if name in options and options[name] not in allowed:
-            raise ValueError(f"{name} must be one of {', '.join(map(repr, allowed))}, "
-                             f"got {options[name]!r}")
-    if "n_directions" in options:
-        nd = options["n_directions"]
-        try:
-            ok = float(nd) == int(nd) and 3 <= int(nd) <= kernels.MAX_DIRECTIONS
-        except (TypeError, ValueError, OverflowError):
-            ok = False
-        if not ok:
-            raise ValueError(f"n_directions must be a whole number from 3 to "
-                             f"{kernels.MAX_DIRECTIONS}, got {nd!r}")
-    orientation = options.get("orientation", "mst")
-    if isinstance(orientation, str) and orientation == "mst":
-        return orientation
-    if not isinstance(orientation, str):
-        orientation = np.asarray(orientation, dtype=np.float64)
-    if isinstance(orientation, str) or orientation.shape != (3,) or not np.isfinite(
-            orientation).all():
-        raise ValueError(f"orientation must be 'mst' or a finite (3,) viewpoint, "
-                         f"got {options['orientation']!r}")
-    return orientation
-
-
 def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_directions=8,
                          neighborhood="auto", *, slab=0.25, min_points=3, min_spread=0.25,
                          weighting="auto", circle_normalization="tangent",
@@ -377,7 +282,7 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
         ``normal_estimation``.
     radius : float or "auto", optional
         Neighbourhood radius, model units. Default: the radius whose ball holds about 100
-        points (:func:`meshcurv.neighborhoods.default_radius`; ~5 mean edge lengths).
+        points (:func:`meshcurv.neighbors.default_radius`; ~5 mean edge lengths).
         "auto": one radius per mesh that balances the noise measured on the data against the
         circle model's bias (:func:`meshcurv.autoradius.auto_radius`; a few pilot runs on a
         sample of vertices). The radius used is ``result.radius``.

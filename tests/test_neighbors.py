@@ -5,7 +5,7 @@ from scipy.spatial import cKDTree
 
 import meshcurv
 from meshcurv import surfaces
-from meshcurv.neighborhoods import ball_grid, ball_neighbors
+from meshcurv.neighbors import ball_grid, ball_neighbors
 
 
 def kdtree_lists(points, query, radius):

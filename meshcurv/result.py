@@ -1,0 +1,81 @@
+"""What the estimator returns: :class:`CurvatureResult`, and the per-vertex field schema every
+writer (PLY, LAS/LAZ, the pymeshlab filter) uses."""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import shape
+
+__all__ = ["CurvatureResult", "CURVATURE_FIELDS", "curvature_fields"]
+
+# Per-vertex curvature fields of every annotated file (PLY properties, LAS extra bytes).
+CURVATURE_FIELDS = shape.FIELDS + ("valid", "d1x", "d1y", "d1z", "d2x", "d2y", "d2z")
+
+
+@dataclass
+class CurvatureResult:
+    """Per-vertex principal curvatures; one row per input vertex (or query point), input order.
+
+    Attributes
+    ----------
+    k1, k2 : (n,) float64, principal curvatures, 1 / model units, ``k1 >= k2``, convex positive
+        under the outward normal; NaN where ``valid`` is False
+    d1, d2 : (n, 3) float64, unit principal directions; ``(d1, d2, normals)`` is right-handed
+    normals : (n, 3) float64, the unit normals used (given, from faces, or estimated)
+    valid : (n,) bool
+    n_neighbors : (n,) int32, neighbours within the radius
+    n_samples : (n,) int32, circle fits used in the Euler fit (at most ``2 * n_directions``)
+    residual : (n,) float64, RMS residual of the Euler fit, 1 / model units
+    noise : (n,) float64, RMS height residual of a local cubic fit over the neighbourhood,
+        model units: an estimate of the noise along the normal (NaN with fewer than 11 points)
+    radius : float, the neighbourhood radius used, model units
+    """
+
+    k1: np.ndarray
+    k2: np.ndarray
+    d1: np.ndarray
+    d2: np.ndarray
+    normals: np.ndarray
+    valid: np.ndarray
+    n_neighbors: np.ndarray
+    n_samples: np.ndarray
+    residual: np.ndarray
+    noise: np.ndarray
+    radius: float
+
+    @property
+    def mean(self):
+        """Mean curvature (k1 + k2) / 2, (n,)."""
+        return shape.mean_curvature(self.k1, self.k2)
+
+    @property
+    def gaussian(self):
+        """Gaussian curvature k1 * k2, (n,)."""
+        return shape.gaussian_curvature(self.k1, self.k2)
+
+    @property
+    def shape_index(self):
+        """Shape index in [-1, 1], +1 for a convex cap, (n,)."""
+        return shape.shape_index(self.k1, self.k2)
+
+    @property
+    def curvedness(self):
+        """Curvedness sqrt((k1^2 + k2^2) / 2), (n,)."""
+        return shape.curvedness(self.k1, self.k2)
+
+    def __len__(self):
+        return len(self.k1)
+
+
+def curvature_fields(result):
+    """The :data:`CURVATURE_FIELDS` of a :class:`~meshcurv.CurvatureResult`, in that order, as
+    ``{name: (n,) array}``: float64, ``valid`` uint8 (1 = estimated), ``d1x .. d2z`` the
+    components of the principal directions."""
+    out = {f: np.asarray(getattr(result, f), dtype=np.float64) for f in shape.FIELDS}
+    out["valid"] = np.asarray(result.valid, dtype=np.uint8)
+    for name in ("d1", "d2"):
+        arr = getattr(result, name)
+        for a, c in enumerate("xyz"):
+            out[name + c] = arr[:, a]
+    return out

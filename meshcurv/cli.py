@@ -183,7 +183,7 @@ def write_preview(path, data, result, elev=30.0, azim=-60.0):
 
     Meshes are drawn as shaded triangles, point clouds as points; invalid vertices are grey.
     """
-    if io._extension(path) != ".png":
+    if io.file_extension(path) != ".png":
         raise io.MeshFileError(f"{path}: the preview must be a .png file")
     try:
         import matplotlib
@@ -228,7 +228,7 @@ def write_preview(path, data, result, elev=30.0, azim=-60.0):
     ax.set_zlim(lo[2], hi[2])
     ax.set_box_aspect(np.maximum(hi - lo, 1e-9 * max(float(np.max(hi - lo)), 1.0)))
     ax.set_axis_off()
-    lut = shape._LUT["turbo"] / 255.0
+    lut = shape.colormap_table("turbo") / 255.0
     sm = plt.cm.ScalarMappable(norm=Normalize(-1, 1),
                                cmap=LinearSegmentedColormap.from_list("meshlab_turbo", lut))
     bar = fig.colorbar(sm, ax=ax, shrink=0.6, pad=0.02)
@@ -272,7 +272,7 @@ def _expand_inputs(inputs, out_dir=None):
             is_out_dir = out_dir is not None and os.path.isdir(out_dir) \
                 and os.path.samefile(p, out_dir)
             out.extend((os.path.join(p, f), True) for f in sorted(os.listdir(p))
-                       if io._extension(f) in io.READERS
+                       if io.file_extension(f) in io.READERS
                        and os.path.isfile(os.path.join(p, f))
                        and not (is_out_dir and f.lower().endswith(_OUTPUT_SUFFIX + ".ply")))
         else:
@@ -384,7 +384,7 @@ def run_batch(inputs, out_dir, options=AnnotateOptions(), jobs=1, overwrite=Fals
         else:
             todo.append(k)
     # temporary files of writes killed in an earlier run (outputs that exist are not rewritten)
-    io._remove_stale_partials(out_dir, [os.path.basename(o) for o in outputs])
+    io.remove_stale_partials(out_dir, [os.path.basename(o) for o in outputs])
     try:
         if scheduler is not None and todo:
             with dask_client(scheduler) as client:  # connect before creating anything
@@ -632,9 +632,9 @@ def build_parser():
 
 def _las_bbox_diagonal(path):
     """Bounding-box diagonal from a LAS/LAZ header (for ``--radius 2%`` on tiled runs)."""
-    from .las import _open
+    from .las import open_las
 
-    with _open(path) as reader:
+    with open_las(path) as reader:
         lo = np.asarray(reader.header.mins, float)
         hi = np.asarray(reader.header.maxs, float)
     return float(np.linalg.norm(hi - lo))
@@ -643,7 +643,7 @@ def _las_bbox_diagonal(path):
 def _check_las_output(in_path, out_path):
     """Before any work on a LAS/LAZ output: refuse an input that already has curvature
     dimensions, and say when the output gets another LAS version than the input (1.0)."""
-    las = io._las_module(in_path)
+    las = io.las_module(in_path)
     las.check_annotatable(in_path)
     version_in, version_out = las.output_version(in_path)
     if version_out != version_in:
@@ -656,7 +656,7 @@ def _cmd_annotate_tiled(args, options):
     """``annotate --tile-size/--dask-scheduler``: hand the LAS/LAZ file to annotate_tiled."""
     las_ext = (".las", ".laz")
     for path, what in ((args.input, "input"), (args.output, "output")):
-        if io._extension(path) not in las_ext:
+        if io.file_extension(path) not in las_ext:
             raise CommandError(f"{path}: --tile-size and --dask-scheduler need a .las or .laz "
                                f"{what} (for many mesh files use: meshcurv batch "
                                "--dask-scheduler)", 2)
@@ -709,20 +709,20 @@ def _cmd_annotate(args):
     _check_options(options)
     if args.tile_size is not None or args.dask_scheduler is not None:
         return _cmd_annotate_tiled(args, options)
-    if io._extension(args.output) not in io.WRITERS:
+    if io.file_extension(args.output) not in io.WRITERS:
         raise CommandError(f"{args.output}: output must be one of "
                            f"{', '.join(sorted(io.WRITERS))}", 2)
-    if args.preview is not None and io._extension(args.preview) != ".png":
+    if args.preview is not None and io.file_extension(args.preview) != ".png":
         raise CommandError(f"{args.preview}: --preview must be a .png file", 2)
     las_ext = (".las", ".laz")
-    if io._extension(args.output) in las_ext and io._extension(args.input) not in las_ext:
+    if io.file_extension(args.output) in las_ext and io.file_extension(args.input) not in las_ext:
         raise CommandError(f"{args.output}: LAS/LAZ output needs a LAS/LAZ input (its points "
                            "are copied with added curvature fields); write .ply", 2)
     try:
         io.check_distinct(args.input, args.output)
     except io.MeshFileError as exc:
         raise CommandError(str(exc), 2) from None
-    if io._extension(args.output) in las_ext and os.path.isfile(args.input):
+    if io.file_extension(args.output) in las_ext and os.path.isfile(args.input):
         _check_las_output(args.input, args.output)
     s = annotate_file(args.input, args.output, options, preview=args.preview,
                       progress=args.progress)

@@ -527,7 +527,7 @@ def read_xyz(path):
     return data
 
 
-def _las_module(path):
+def las_module(path):
     """:mod:`meshcurv.las`, or a MeshFileError naming ``path`` when laspy is not installed."""
     try:
         import laspy  # noqa: F401  (las.py imports it lazily; fail here with a useful message)
@@ -547,7 +547,7 @@ def read_las(path):
     :data:`CURVATURE_FIELDS` extra dimensions of an annotated file. Clouds larger than memory
     go through :func:`meshcurv.tiled.annotate_tiled` instead.
     """
-    las = _las_module(path)
+    las = las_module(path)
     try:
         xyz, normals, fields = las.read_las_cloud(path, fields=CURVATURE_FIELDS)
     except las.LasReadError as exc:  # its message already names the file
@@ -564,7 +564,7 @@ def register_reader(extension, reader):
     READERS[extension.lower()] = reader
 
 
-def _extension(path):
+def file_extension(path):
     return os.path.splitext(str(path))[1].lower()
 
 
@@ -638,7 +638,7 @@ def read(path):
     ((6400, 3), (12800, 3))
     """
     path = os.fspath(path)
-    ext = _extension(path)
+    ext = file_extension(path)
     _check_readable_file(path)
     if ext not in READERS:
         raise MeshFileError(f"{path}: unsupported file type {ext or '(no extension)'!r}; "
@@ -717,7 +717,7 @@ def _pid_alive(pid):
     return True
 
 
-def _remove_stale_partials(directory, names):
+def remove_stale_partials(directory, names):
     """Remove the temporary files of :func:`atomic_write` for the targets ``names`` (basenames)
     in ``directory`` whose writing process, on this host, is no longer alive; returns the paths
     removed. A live process's file (another run writing the same target) is never touched;
@@ -765,7 +765,7 @@ def atomic_write(path, write_fn):
     directory = os.path.dirname(os.path.abspath(path))
     os.makedirs(directory, exist_ok=True)
     name = os.path.basename(path)
-    _remove_stale_partials(directory, [name])
+    remove_stale_partials(directory, [name])
     fd, tmp = tempfile.mkstemp(dir=directory, prefix=f".{name}.{_host_tag()}.{os.getpid()}.",
                                suffix=PARTIAL_SUFFIX)
     os.close(fd)
@@ -837,7 +837,7 @@ def write_annotated(path, data, result, quality="mean", colormap="Turbo", clamp=
     :func:`read` gives them back as ``fields["k1"]``. Other per-vertex properties of the input
     PLY (``data.fields``) are kept unless an annotated field has the same name.
     """
-    if _extension(path) != ".ply":
+    if file_extension(path) != ".ply":
         raise MeshFileError(f"{path}: annotated output must be a .ply file")
     if data.path:
         check_distinct(data.path, path)
@@ -873,11 +873,11 @@ def write_las(path, data, result, quality=None, colormap=None, clamp=None):
     :mod:`meshcurv.las`. ``.laz`` output is compressed. LAS has no colour ramp or quality
     property, so ``quality``, ``colormap`` and ``clamp`` are accepted and ignored.
     """
-    if _extension(data.path) not in (".las", ".laz"):
+    if file_extension(data.path) not in (".las", ".laz"):
         raise MeshFileError(f"{path}: LAS/LAZ output adds fields to the points of a LAS/LAZ "
                             f"input, but the input is {data.path or 'in memory'}; write .ply")
     check_distinct(data.path, path)
-    las = _las_module(path)
+    las = las_module(path)
     try:
         las.write_las_curvature(data.path, path, result)
     except las.LasReadError as exc:
@@ -894,7 +894,7 @@ def register_writer(extension, writer):
 
 def write(path, data, result, **options):
     """Write an annotated file; the writer is chosen by extension (see :data:`WRITERS`)."""
-    ext = _extension(path)
+    ext = file_extension(path)
     if ext not in WRITERS:
         raise MeshFileError(f"{path}: cannot write {ext or '(no extension)'!r} files; "
                             f"writable: {', '.join(sorted(WRITERS))}")

@@ -65,7 +65,7 @@ def _is_las(path):
     return str(path).lower().endswith((".las", ".laz"))
 
 
-def _open(path):
+def open_las(path):
     import laspy
 
     if not _is_las(path):
@@ -89,7 +89,7 @@ def _open(path):
     return reader
 
 
-def _normal_dims(point_format):
+def normal_dims(point_format):
     """Names of the three extra dimensions holding normals, or None."""
     names = {n.lower(): n for n in point_format.extra_dimension_names}
     for cand in _NORMAL_NAMES:
@@ -109,7 +109,7 @@ def output_version(path_or_header):
 
     header = path_or_header
     if not isinstance(header, laspy.LasHeader):
-        with _open(path_or_header) as reader:
+        with open_las(path_or_header) as reader:
             header = reader.header
     version = str(header.version)
     if version in laspy.supported_versions():
@@ -133,10 +133,10 @@ def check_annotatable(path, normals=None):
     normals). Raises ValueError when the file already has one of them (an annotated file),
     :class:`LasReadError` when it cannot be read.
     """
-    with _open(path) as reader:
+    with open_las(path) as reader:
         point_format = reader.header.point_format
     if normals is None:
-        normals = _normal_dims(point_format) is None
+        normals = normal_dims(point_format) is None
     names = list(CURVATURE_FIELDS) + (list(NORMAL_FIELDS) if normals else [])
     _check_new_dims(path, point_format, names)
     return names
@@ -144,7 +144,7 @@ def check_annotatable(path, normals=None):
 
 def las_point_count(path):
     """Number of points declared in the header of a LAS/LAZ file (int)."""
-    with _open(path) as reader:
+    with open_las(path) as reader:
         return int(reader.header.point_count)
 
 
@@ -170,10 +170,10 @@ def iter_las_chunks(path, chunk_size=DEFAULT_CHUNK, start=0, stop=None, with_rec
     LasReadError
         The file is truncated or corrupt; the message names the file and the point range.
     """
-    with _open(path) as reader:
+    with open_las(path) as reader:
         total = int(reader.header.point_count)
         stop = total if stop is None else min(int(stop), total)
-        ndims = _normal_dims(reader.header.point_format)
+        ndims = normal_dims(reader.header.point_format)
         pos = int(start)
         try:
             if pos:
@@ -225,7 +225,7 @@ def read_las_cloud(path, chunk_size=DEFAULT_CHUNK, fields=CURVATURE_FIELDS):
     found : dict name -> (n,) array, the dimensions of ``fields`` the file has (e.g. the
         curvature fields of an annotated file), in their stored type
     """
-    with _open(path) as reader:
+    with open_las(path) as reader:
         have = {n.lower(): n for n in reader.header.point_format.extra_dimension_names}
     wanted = {f: have[f.lower()] for f in fields if f.lower() in have}
     xyz, nv, found = [], [], {f: [] for f in wanted}
@@ -257,7 +257,7 @@ def _field_types(names, float_type):
     return [(n, np.uint8 if n == "valid" else np.dtype(float_type)) for n in names]
 
 
-def _check_paths(in_path, out_path):
+def check_paths(in_path, out_path):
     if not _is_las(out_path):
         raise ValueError(f"{out_path}: the output must be a .las or .laz file")
     check_distinct(in_path, out_path)
@@ -288,8 +288,8 @@ def annotate_las(in_path, out_path, fields_for, names, chunk_size=DEFAULT_CHUNK,
     """
     import laspy
 
-    _check_paths(in_path, out_path)
-    with _open(in_path) as reader:
+    check_paths(in_path, out_path)
+    with open_las(in_path) as reader:
         header = copy.deepcopy(reader.header)
     _check_new_dims(in_path, header.point_format, names)
     version = output_version(header)[1]
@@ -325,7 +325,7 @@ def write_las_curvature(in_path, out_path, result, normals=None, chunk_size=DEFA
     result : CurvatureResult with one row per point of ``in_path``, in file order
     normals : bool, write NormalX..NormalZ (default: when the input has no normals)
     """
-    _check_paths(in_path, out_path)
+    check_paths(in_path, out_path)
     total = las_point_count(in_path)
     if len(result) != total:
         raise ValueError(f"result has {len(result)} rows, {in_path} has {total} points")

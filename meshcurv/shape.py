@@ -8,7 +8,7 @@ and NaN propagates.
 import numpy as np
 
 __all__ = ["mean_curvature", "gaussian_curvature", "shape_index", "curvedness", "FIELDS",
-           "COLORMAPS", "INVALID_COLOR", "color_range", "colorize"]
+           "COLORMAPS", "INVALID_COLOR", "color_range", "colorize", "colormap_table"]
 
 
 def mean_curvature(k1, k2):
@@ -93,6 +93,12 @@ COLORMAPS = tuple(_TABLES)
 _LUT = {name.lower(): np.array([[int(c) for c in rgb.split(",")] for rgb in table.split()],
                                dtype=np.float64)
         for name, table in _TABLES.items()}
+
+
+def colormap_table(name):
+    """The colour ramp ``name`` (one of :data:`COLORMAPS`, any case) as (k, 3) float64 RGB in
+    0..255, from its low end to its high end."""
+    return _LUT[str(name).lower()].copy()
 
 
 def color_range(values, field, clamp=2.0):

@@ -824,18 +824,18 @@ def annotate_tiled(in_path, out_path, radius=None, tile_size=None, *, orientatio
     """
     t0 = time.perf_counter()
     in_path, out_path = os.path.abspath(in_path), os.path.abspath(out_path)
-    las._check_paths(in_path, out_path)
+    las.check_paths(in_path, out_path)
     orientation = _check_options(orientation, options)
     chunk_size = int(chunk_size)
     if chunk_size < 1:
         raise ValueError(f"chunk_size must be a positive number of points, got {chunk_size}")
     # an annotated input is refused now, not after the whole computation
     names = las.check_annotatable(in_path)
-    with las._open(in_path) as reader:
+    with las.open_las(in_path) as reader:
         header = reader.header
         n_points = int(header.point_count)
         mins, maxs = np.asarray(header.mins, float), np.asarray(header.maxs, float)
-        has_normals = las._normal_dims(header.point_format) is not None
+        has_normals = las.normal_dims(header.point_format) is not None
     if isinstance(radius, str):
         raise ValueError(f"tiled runs need a radius in model units or None, got {radius!r} "
                          "(a data-driven radius needs the whole cloud)")

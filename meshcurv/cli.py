@@ -632,7 +632,7 @@ def build_parser():
 
 def _las_bbox_diagonal(path):
     """Bounding-box diagonal from a LAS/LAZ header (for ``--radius 2%`` on tiled runs)."""
-    from .las import open_las
+    from .io.las import open_las
 
     with open_las(path) as reader:
         lo = np.asarray(reader.header.mins, float)

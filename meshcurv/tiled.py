@@ -63,7 +63,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from tqdm.auto import tqdm
 
-from . import las
+from .io import las
 from .io import atomic_write, first_line
 
 __all__ = ["TileError", "TiledReport", "TileGrid", "annotate_tiled", "principal_curvatures_tiled"]

@@ -337,7 +337,7 @@ def las_file(tmp_path_factory):
 
 def test_las_input_annotates_in_memory_to_las_and_ply(tmp_path, capsys, las_file):
     laspy = pytest.importorskip("laspy")
-    from meshcurv import las
+    from meshcurv.io import las
 
     xyz, normals = las.read_las_points(str(las_file))
     res = meshcurv.principal_curvatures(xyz, normals=normals, radius=0.25)

@@ -337,7 +337,7 @@ def _dead_pid():
 
 def test_a_write_removes_the_temporary_files_of_killed_writers_only(tmp_path):
     target = tmp_path / "x.ply"
-    host = io._host_tag()
+    host = io.atomic.host_tag()
     dead = tmp_path / f".x.ply.{host}.{_dead_pid()}.abcd1234.part"
     live = tmp_path / f".x.ply.{host}.{os.getppid()}.abcd1234.part"
     other_host = tmp_path / f".x.ply.{host}-other.{_dead_pid()}.abcd1234.part"
@@ -384,7 +384,7 @@ def test_a_batch_rerun_removes_stale_temporary_files_of_skipped_outputs(tmp_path
     out = tmp_path / "out"
     assert cli.main(["batch", str(d), "-O", str(out)]) == 0
     # an --overwrite run killed while rewriting a_curvature.ply left its temporary file
-    stale = out / f".a_curvature.ply.{io._host_tag()}.{_dead_pid()}.k3j9x2q1.part"
+    stale = out / f".a_curvature.ply.{io.atomic.host_tag()}.{_dead_pid()}.k3j9x2q1.part"
     stale.write_bytes(b"partial")
     assert cli.main(["batch", str(d), "-O", str(out)]) == 0
     assert "0 annotated, 1 skipped" in capsys.readouterr().out

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 import meshcurv
-from meshcurv import cli, las
+from meshcurv import cli
+from meshcurv.io import las
 
 VIEWPOINT = (20.0, 20.0, 500.0)
 

@@ -416,7 +416,7 @@ TIME_LIMIT = 10.0           # seconds for one read of such a file
 FUZZ_COUNTS = Counter()
 
 
-# LAS/LAZ files are parsed by laspy through meshcurv.las (not the readers of this file), which
+# LAS/LAZ files are parsed by laspy through meshcurv.io.las (not the readers of this file), which
 # bounds the point count of a LAS file by its size but not a LAZ file's (compressed) nor the
 # count of variable-length records: there, reads over the time or memory limit are counted and
 # reported, not asserted.
@@ -432,7 +432,7 @@ def _over_memory(fmt, message):
 def _las_errors():
     if not _has_las():
         return ()
-    from meshcurv import las
+    from meshcurv.io import las
 
     return (las.LasReadError,)
 
@@ -540,7 +540,7 @@ def test_fuzzed_files_read_as_valid_data_or_fail_with_one_line(fmt, fuzz_dir):
 @pytest.mark.slow
 @pytest.mark.parametrize("fmt", [pytest.param(f, marks=pytest.mark.skip(
     reason="lazrs aborts the whole process (Rust out-of-memory) on a corrupt LAZ chunk table; "
-           "meshcurv.las does not check it before decoding")) if f == "laz" else f
+           "meshcurv.io.las does not check it before decoding")) if f == "laz" else f
     for f in BASES])
 def test_fuzzed_files_read_as_valid_data_or_fail_with_one_line_long_run(fmt, fuzz_dir):
     # LAS/LAZ only here: some of their corrupt headers take seconds and hundreds of MB

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import meshcurv
-from meshcurv import las
+from meshcurv.io import las
 from meshcurv.tiled import TileError, annotate_tiled, principal_curvatures_tiled
 
 # Every per-point field of CurvatureResult; the tiled run must reproduce all of them.

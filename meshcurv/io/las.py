@@ -1,5 +1,11 @@
 """LAS/LAZ point clouds: chunked reading and curvature fields written as LAS extra-bytes dimensions.
 
+laspy (LAZ through lazrs; the optional extra ``las``) is imported when a file is read or written,
+not with this module: without it, :func:`read_las` and :func:`write_las` raise a MeshFileError
+saying what to install. For clouds larger than memory use :func:`meshcurv.tiled.annotate_tiled`
+(``meshcurv annotate --tile-size``), which streams the file through :func:`iter_las_chunks` and
+:func:`annotate_las`.
+
 Reading and writing go through laspy (LAZ through the lazrs backend) and stream the file in
 chunks, so files larger than memory are fine. The written file keeps every dimension of the input
 unchanged (raw integer X, Y, Z, intensity, classification, existing extra bytes, ...) and adds one
@@ -36,12 +42,15 @@ import os
 
 import numpy as np
 
-from .io import atomic_write, check_distinct
-from .result import CURVATURE_FIELDS, curvature_fields
+from ..result import CURVATURE_FIELDS, curvature_fields
+from .atomic import atomic_write, check_distinct
+from .data import MeshData, MeshFileError, file_extension, first_line
 
-__all__ = ["LasReadError", "CURVATURE_FIELDS", "NORMAL_FIELDS", "las_point_count",
-           "iter_las_chunks", "read_las_points", "read_las_cloud", "result_fields",
-           "output_version", "check_annotatable", "annotate_las", "write_las_curvature"]
+__all__ = ["LasReadError", "CURVATURE_FIELDS", "NORMAL_FIELDS", "DEFAULT_CHUNK",
+           "las_point_count", "open_las", "normal_dims", "iter_las_chunks", "read_las_points",
+           "read_las_cloud", "result_fields", "output_version", "check_paths",
+           "check_annotatable", "annotate_las", "write_las_curvature", "require_laspy",
+           "read_las", "write_las", "readers", "writers"]
 
 
 NORMAL_FIELDS = ("NormalX", "NormalY", "NormalZ")
@@ -66,6 +75,13 @@ def _is_las(path):
 
 
 def open_las(path):
+    """A laspy reader of the LAS/LAZ file ``path`` (a context manager), its header checked
+    against the file size when the points are not compressed.
+
+    Raises ValueError when ``path`` is not .las/.laz, FileNotFoundError when it is missing,
+    :class:`LasReadError` when laspy cannot read its header or the header declares more
+    points than the file holds.
+    """
     import laspy
 
     if not _is_las(path):
@@ -258,6 +274,7 @@ def _field_types(names, float_type):
 
 
 def check_paths(in_path, out_path):
+    """ValueError unless ``out_path`` is a .las/.laz file; MeshFileError when it is the input."""
     if not _is_las(out_path):
         raise ValueError(f"{out_path}: the output must be a .las or .laz file")
     check_distinct(in_path, out_path)
@@ -334,3 +351,54 @@ def write_las_curvature(in_path, out_path, result, normals=None, chunk_size=DEFA
     fields = result_fields(result, normals=normals, float_type=float_type)
     annotate_las(in_path, out_path, lambda a, k: {n: fields[n][a:a + k] for n in names}, names,
                  chunk_size=chunk_size, float_type=float_type)
+
+
+# ------------------------------------------------------------------ reader and writer of meshcurv.io
+
+def require_laspy(path):
+    """Raise a MeshFileError naming ``path`` when laspy is not installed."""
+    try:
+        import laspy  # noqa: F401  (imported lazily elsewhere; fail here with a useful message)
+    except ImportError:
+        raise MeshFileError(f"{path}: LAS/LAZ files need laspy and lazrs "
+                            "(pip install 'meshcurv[las]')") from None
+
+
+def read_las(path):
+    """Read a LAS/LAZ point cloud (laspy; LAZ through lazrs) into memory, in file order.
+
+    ``vertices`` are the scaled x, y, z ((n, 3) float64, model units); ``normals`` come from
+    NormalX..NormalZ (or nx.., normal_x..) extra dimensions when the file has them; ``fields``
+    holds the :data:`CURVATURE_FIELDS` extra dimensions of an annotated file. Clouds larger
+    than memory go through :func:`meshcurv.tiled.annotate_tiled` instead.
+    """
+    require_laspy(path)
+    try:
+        xyz, normals, fields = read_las_cloud(path, fields=CURVATURE_FIELDS)
+    except LasReadError as exc:  # its message already names the file
+        raise MeshFileError(first_line(exc)) from exc
+    return MeshData(vertices=xyz, normals=normals, fields=fields, path=path)
+
+
+def write_las(path, data, result, quality=None, colormap=None, clamp=None):
+    """Write the LAS/LAZ input of ``data`` with the curvature ``result`` to ``path`` (atomic).
+
+    Every point record of the input is copied unchanged and the fields of
+    :data:`meshcurv.result.CURVATURE_FIELDS` (float64, ``valid`` uint8) are added as named
+    extra-bytes dimensions, plus NormalX..NormalZ when the input has no normals (see
+    :func:`write_las_curvature`). ``.laz`` output is compressed. LAS has no colour ramp or
+    quality property, so ``quality``, ``colormap`` and ``clamp`` are accepted and ignored.
+    """
+    if file_extension(data.path) not in (".las", ".laz"):
+        raise MeshFileError(f"{path}: LAS/LAZ output adds fields to the points of a LAS/LAZ "
+                            f"input, but the input is {data.path or 'in memory'}; write .ply")
+    check_distinct(data.path, path)
+    require_laspy(path)
+    try:
+        write_las_curvature(data.path, path, result)
+    except LasReadError as exc:
+        raise MeshFileError(first_line(exc)) from exc
+
+
+readers = {".las": read_las, ".laz": read_las}
+writers = {".las": write_las, ".laz": write_las}

@@ -1,4 +1,4 @@
-"""LAS/LAZ in and out: chunked reading, curvature fields as extra-bytes dimensions, bad files."""
+"""meshcurv.io.las: chunked reading, curvature fields as extra-bytes dimensions, bad files."""
 
 import os
 
@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 import meshcurv
-from meshcurv import las, result
+from meshcurv import result
+from meshcurv.io import las
 
 VIEWPOINT = (20.0, 20.0, 500.0)
 

@@ -1,74 +1,22 @@
-"""meshcurv.io: readers keep vertex order, the annotated PLY round-trips bit for bit, writes are
-atomic, bad files fail with the file name; meshcurv.shape colour maps."""
+"""meshcurv.io, the dispatcher: readers keep vertex order, every format module's table is
+registered, writes are atomic, bad files fail with the file name, the format modules import
+neither the dispatcher nor their soft dependencies; meshcurv.shape colour maps."""
 
+import ast
+import doctest
 import os
+import pathlib
+import subprocess
+import sys
 
 import numpy as np
 import pytest
-from plyfile import PlyData
 
-import meshcurv
-from meshcurv import io, shape, surfaces
+from meshcurv import io, shape
+from meshcurv.io import atomic, data, las, obj, off, parse, ply, stl, xyz
 
-
-@pytest.fixture(scope="module")
-def torus():
-    return surfaces.torus(major=2.0, minor=0.5, n_major=64, n_minor=24)
-
-
-@pytest.fixture(scope="module")
-def torus_result(torus):
-    return meshcurv.principal_curvatures(torus.vertices, torus.faces, radius=0.3)
-
-
-def test_annotated_ply_fields_are_bit_identical_to_api_arrays(tmp_path, torus, torus_result):
-    res = torus_result
-    data = io.MeshData(torus.vertices, torus.faces)
-    out = tmp_path / "t.ply"
-    io.write_annotated(str(out), data, res, quality="k2")
-    ply = PlyData.read(str(out))
-    assert ply.text is False  # binary
-    v = ply["vertex"].data
-    expected = {"x": torus.vertices[:, 0], "y": torus.vertices[:, 1], "z": torus.vertices[:, 2],
-                "k1": res.k1, "k2": res.k2, "mean": res.mean, "gaussian": res.gaussian,
-                "shape_index": res.shape_index, "curvedness": res.curvedness,
-                "nx": res.normals[:, 0], "ny": res.normals[:, 1], "nz": res.normals[:, 2],
-                "d1x": res.d1[:, 0], "d1y": res.d1[:, 1], "d1z": res.d1[:, 2],
-                "d2x": res.d2[:, 0], "d2y": res.d2[:, 1], "d2z": res.d2[:, 2],
-                "residual": res.residual, "quality": np.where(res.valid, res.k2, 0.0)}
-    for name, arr in expected.items():
-        name = io.ply_property(name)  # scalar_k1 in the file (CloudCompare's spelling)
-        assert v[name].dtype == np.float64, name
-        # bit-identical: equal bytes, NaN included
-        assert v[name].tobytes() == np.ascontiguousarray(arr, dtype="<f8").tobytes(), name
-    assert v["scalar_valid"].dtype == np.uint8
-    np.testing.assert_array_equal(v["scalar_valid"], res.valid)
-    np.testing.assert_array_equal(v["scalar_n_neighbors"], res.n_neighbors)
-    rgb = np.column_stack([v["red"], v["green"], v["blue"]])
-    np.testing.assert_array_equal(rgb, shape.colorize(np.where(res.valid, res.k2, np.nan), "k2"))
-    np.testing.assert_array_equal(np.stack(ply["face"].data["vertex_indices"]), torus.faces)
-
-    back = io.read(str(out))  # and our own reader gives the same arrays
-    np.testing.assert_array_equal(back.vertices, torus.vertices)
-    np.testing.assert_array_equal(back.faces, torus.faces)
-    for name in shape.FIELDS:
-        np.testing.assert_array_equal(back.fields[name], getattr(res, name))
-
-
-def test_point_cloud_ply_has_no_faces_and_keeps_extra_fields(tmp_path):
-    pts = np.random.default_rng(1).normal(size=(200, 3))
-    src = tmp_path / "cloud.ply"
-    io.write_ply(str(src), pts, None, {"intensity": np.arange(200, dtype=np.float32)})
-    data = io.read(str(src))
-    assert data.is_point_cloud and data.faces is None
-    np.testing.assert_array_equal(data.vertices, pts)
-    assert data.fields["intensity"].dtype == np.float32
-    res = meshcurv.principal_curvatures(pts)
-    out = tmp_path / "cloud_curv.ply"
-    io.write_annotated(str(out), data, res)
-    ply = PlyData.read(str(out))
-    assert [e.name for e in ply.elements] == ["vertex"]
-    np.testing.assert_array_equal(ply["vertex"].data["intensity"], np.arange(200))
+FORMATS = (ply, obj, off, stl, xyz, las)
+IO_DIR = pathlib.Path(io.__file__).parent
 
 
 def test_text_and_trimesh_readers_keep_vertex_order(tmp_path):
@@ -98,22 +46,6 @@ def test_text_and_trimesh_readers_keep_vertex_order(tmp_path):
     assert data.normals is None and (data.fields["intensity"] == 7).all()
 
 
-def test_stl_corners_are_merged_in_order_of_first_appearance(tmp_path):
-    import trimesh
-
-    sphere = surfaces.sphere(subdivisions=2)
-    path = tmp_path / "s.stl"
-    trimesh.Trimesh(sphere.vertices, sphere.faces, process=False).export(str(path))
-    data = io.read(str(path))
-    # STL is float32: compare positions at float32 precision, order of first use in faces
-    first_use = np.unique(sphere.faces.ravel(), return_index=True)[1]
-    order = sphere.faces.ravel()[np.sort(first_use)]
-    np.testing.assert_array_equal(data.vertices, sphere.vertices[order].astype(np.float32))
-    assert len(data.faces) == len(sphere.faces)
-    np.testing.assert_array_equal(data.vertices[data.faces],
-                                  sphere.vertices[sphere.faces].astype(np.float32))
-
-
 def test_atomic_write_removes_the_temporary_file_on_failure(tmp_path):
     target = tmp_path / "out.ply"
 
@@ -125,16 +57,6 @@ def test_atomic_write_removes_the_temporary_file_on_failure(tmp_path):
     with pytest.raises(RuntimeError):
         io.atomic_write(str(target), failing)
     assert os.listdir(tmp_path) == []
-
-
-def test_writing_over_the_input_file_is_refused(tmp_path, torus, torus_result):
-    src = tmp_path / "in.ply"
-    io.write_ply(str(src), torus.vertices, torus.faces)
-    before = src.read_bytes()
-    data = io.read(str(src))
-    with pytest.raises(io.MeshFileError, match="input"):
-        io.write_annotated(str(tmp_path / "." / "in.ply"), data, torus_result)
-    assert src.read_bytes() == before
 
 
 @pytest.mark.parametrize("name, content, message", [
@@ -154,6 +76,79 @@ def test_bad_files_raise_meshfileerror_naming_the_file(tmp_path, name, content, 
     with pytest.raises(io.MeshFileError, match=message) as exc:
         io.read(str(path))
     assert str(exc.value).startswith(str(path))
+
+
+def test_every_format_table_is_registered_by_its_extension():
+    readers = {ext: f for m in FORMATS for ext, f in m.readers.items()}
+    writers = {ext: f for m in FORMATS for ext, f in getattr(m, "writers", {}).items()}
+    assert io.READERS == readers and io.WRITERS == writers
+    assert all(ext == io.file_extension("a" + ext) for ext in {**readers, **writers})
+
+
+def test_writing_an_extension_without_a_writer_names_the_writable_ones(tmp_path):
+    with pytest.raises(io.MeshFileError, match=r"cannot write '\.obj'.*\.las, \.laz, \.ply"):
+        io.write(str(tmp_path / "x.obj"), io.MeshData(np.zeros((1, 3))), None)
+
+
+def _imports(path):
+    """``(level, module, names)`` of each import statement of the file ``path``, function-level
+    ones included (``import a.b`` as ``(0, None, ["a.b"])``)."""
+    tree = ast.parse(path.read_text())
+    return [(n.level, n.module, [a.name for a in n.names]) if isinstance(n, ast.ImportFrom)
+            else (0, None, [a.name for a in n.names])
+            for n in ast.walk(tree) if isinstance(n, (ast.Import, ast.ImportFrom))]
+
+
+def test_format_modules_import_neither_the_dispatcher_nor_an_adapter():
+    siblings = {p.stem for p in IO_DIR.glob("*.py")} - {"__init__"}
+    for path in IO_DIR.glob("*.py"):
+        if path.stem == "__init__":
+            continue
+        for level, module, names in _imports(path):
+            where = (path.name, level, module, names)
+            if level == 1:  # from .data import ...: a sibling module, never the package
+                assert module in siblings, where
+            elif level == 2:  # from .. import shape / from ..result import ...: the core only
+                assert not {module, *names} & {"io", "cli", "tiled", "batch"}, where
+            else:  # third-party only (numpy, laspy, ...), never meshcurv by absolute name
+                assert level == 0 and not any(
+                    n.startswith("meshcurv") for n in [module or "", *names]), where
+
+
+def test_importing_the_package_loads_no_parser_library():
+    code = ("import sys, meshcurv.io; print(sorted(m for m in ('laspy', 'plyfile', 'trimesh', "
+            "'numba', 'scipy', 'lazrs') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout
+    assert out.strip() == "[]"
+
+
+def test_las_files_without_laspy_fail_at_use_with_the_install_hint(tmp_path):
+    path = tmp_path / "a.las"
+    path.write_bytes(b"LASF" + bytes(400))
+    code = ("import sys; sys.modules['laspy'] = None\n"
+            "from meshcurv import io\n"
+            "try:\n    io.read(sys.argv[1])\nexcept io.MeshFileError as exc:\n    print(exc)")
+    out = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True,
+                         text=True, check=True).stdout
+    assert out.strip() == f"{path}: LAS/LAZ files need laspy and lazrs (pip install 'meshcurv[las]')"
+
+
+@pytest.mark.parametrize("module", [io, data, atomic, parse, *FORMATS],
+                         ids=lambda m: m.__name__)
+def test_docstring_examples_run(module):
+    result = doctest.testmod(module, optionflags=doctest.ELLIPSIS)
+    assert result.failed == 0
+
+
+def test_check_distinct_refuses_the_input_under_another_name(tmp_path):
+    src = tmp_path / "in.ply"
+    src.write_bytes(b"x")
+    os.link(src, tmp_path / "hard.ply")
+    for same in (tmp_path / "." / "in.ply", tmp_path / "hard.ply"):
+        with pytest.raises(io.MeshFileError, match="refusing to overwrite the input"):
+            io.check_distinct(str(src), str(same))
+    io.check_distinct(str(src), str(tmp_path / "out.ply"))
 
 
 def test_colorize_shape_index_uses_the_fixed_scale_and_grey_for_invalid():

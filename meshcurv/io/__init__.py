@@ -164,7 +164,18 @@ def read(path):
 
 
 def write(path, data, result, **options):
-    """Write an annotated file; the writer is chosen by extension (see :data:`WRITERS`)."""
+    """Write an annotated file; the writer is chosen by extension (see :data:`WRITERS`).
+
+    Parameters
+    ----------
+    path : str, the output; .ply (:func:`write_annotated`) or .las/.laz (:func:`write_las`,
+        for a LAS/LAZ input only)
+    data : MeshData, the geometry ``result`` was computed on (``data.path`` is never replaced)
+    result : CurvatureResult, one row per vertex of ``data``
+    **options : ``quality``, ``colormap``, ``clamp`` of :func:`write_annotated`
+
+    Raises MeshFileError (message starting with ``path``) for an extension without a writer.
+    """
     ext = file_extension(path)
     if ext not in WRITERS:
         raise MeshFileError(f"{path}: cannot write {ext or '(no extension)'!r} files; "

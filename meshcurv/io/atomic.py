@@ -46,6 +46,7 @@ def host_tag():
 
 
 def _pid_alive(pid):
+    """Whether a process ``pid`` exists on this host (signal 0: nothing is sent)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:

@@ -71,6 +71,7 @@ class LasReadError(OSError):
 
 
 def _is_las(path):
+    """Whether ``path`` ends in .las or .laz (any case)."""
     return str(path).lower().endswith((".las", ".laz"))
 
 
@@ -134,6 +135,8 @@ def output_version(path_or_header):
 
 
 def _check_new_dims(path, point_format, names):
+    """ValueError when the laspy ``point_format`` of ``path`` already has a dimension of
+    ``names`` (case-insensitive), listing at most three of them."""
     existing = {d.lower() for d in point_format.dimension_names}
     clash = [n for n in names if n.lower() in existing]
     if clash:
@@ -270,6 +273,7 @@ def result_fields(result, normals=False, float_type="f8"):
 
 
 def _field_types(names, float_type):
+    """``[(name, dtype)]`` of the new dimensions: uint8 for ``valid``, ``float_type`` else."""
     return [(n, np.uint8 if n == "valid" else np.dtype(float_type)) for n in names]
 
 

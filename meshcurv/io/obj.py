@@ -8,6 +8,27 @@ from .parse import parse_coordinates, read_text, triangulate
 __all__ = ["read_obj", "readers"]
 
 
+def _face_corners(tokens, n_before, lineno):
+    """0-based vertex indices of the corners ``tokens`` (``v``, ``v/vt``, ``v//vn``, ``v/vt/vn``)
+    of the ``f`` line ``lineno``, after ``n_before`` vertices; negative indices count back
+    from the last of them."""
+    corners = []
+    for token in tokens:
+        try:
+            i = int(token.split("/", 1)[0])
+        except ValueError:
+            raise ValueError(f"line {lineno}: {token!r} is not a vertex index") from None
+        if i == 0:
+            raise ValueError(f"line {lineno}: vertex index 0 (OBJ counts from 1)")
+        if i < 0:  # relative to the vertices read so far
+            if -i > n_before:
+                raise ValueError(f"line {lineno}: relative index {i} but only "
+                                 f"{n_before} vertices before it")
+            i += n_before + 1
+        corners.append(i - 1)
+    return corners
+
+
 def read_obj(path):
     """Read a Wavefront OBJ mesh: one row per ``v`` line, in file order.
 
@@ -29,21 +50,7 @@ def read_obj(path):
                 raise ValueError(f"line {lineno}: a vertex needs x y z")
             rows.append(parts[1:4])
         elif parts[0] == "f":
-            corners = []
-            for token in parts[1:]:
-                try:
-                    i = int(token.split("/", 1)[0])
-                except ValueError:
-                    raise ValueError(f"line {lineno}: {token!r} is not a vertex index") from None
-                if i == 0:
-                    raise ValueError(f"line {lineno}: vertex index 0 (OBJ counts from 1)")
-                if i < 0:  # relative to the vertices read so far
-                    if -i > len(rows):
-                        raise ValueError(f"line {lineno}: relative index {i} but only "
-                                         f"{len(rows)} vertices before it")
-                    i += len(rows) + 1
-                corners.append(i - 1)
-            polygons.append(corners)
+            polygons.append(_face_corners(parts[1:], len(rows), lineno))
     vertices = parse_coordinates(rows, "vertex")
     if all(len(p) == 3 for p in polygons):
         faces = np.array(polygons, dtype=np.int64).reshape(-1, 3)

@@ -51,6 +51,7 @@ def _stl_corners(raw):
 
 
 def _is_number(token):
+    """Whether the bytes ``token`` parse as a float."""
     try:
         float(token)
     except ValueError:
@@ -59,7 +60,8 @@ def _is_number(token):
 
 
 def _merge_exact(vertices, faces):
-    """Merge vertices with identical coordinates, keeping the order of first appearance."""
+    """Merge (n, 3) ``vertices`` with identical coordinates, keeping the order of first
+    appearance; returns the merged (k, 3) vertices and ``faces`` ((m, 3) int) renumbered."""
     _, first, inverse = np.unique(vertices, axis=0, return_index=True, return_inverse=True)
     order = np.argsort(first, kind="stable")
     rank = np.empty_like(order)

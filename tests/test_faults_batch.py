@@ -3,8 +3,8 @@ and parallel, and a rerun retries only it; outputs are never inputs and never re
 workers die with a killed parent and Ctrl-C stops everything with one line; temporary files of
 killed writes are removed by the next write, never those of a live process.
 
-Crashes are produced by :func:`crashing_run_one`, put in place of ``cli._run_one`` in a batch
-run in a subprocess: the workers import it by name from this module, so it crashes inside the
+Crashes are produced by :func:`crashing_run_one`, put in place of ``cli.batch.run_one`` in a
+batch run in a subprocess: the workers import it by name from this module, so it crashes inside the
 worker exactly where a segmentation fault of the estimator would (no test hook in meshcurv)."""
 
 import os
@@ -19,10 +19,11 @@ import time
 import pytest
 
 from meshcurv import cli, io, surfaces
-from meshcurv.batch import WorkerPool, crash_reason
+from meshcurv.cli import batch
+from meshcurv.cli.batch import WorkerPool, crash_reason
 
 TESTS = os.path.dirname(os.path.abspath(__file__))
-_REAL_RUN_ONE = cli._run_one
+_REAL_RUN_ONE = batch.run_one
 COMPILING = "meshcurv: compiling the numba kernels"
 
 
@@ -41,7 +42,7 @@ def _crash(kind):
 
 
 def crashing_run_one(input_path, output_path, options):
-    """``cli._run_one``, except that an input named segv/abort/exit/oom.* kills the worker."""
+    """``cli.batch.run_one``, except that an input named segv/abort/exit/oom.* kills the worker."""
     kind = os.path.splitext(os.path.basename(input_path))[0]
     if kind in ("segv", "abort", "exit", "oom"):
         _crash(kind)
@@ -65,7 +66,7 @@ def run_cli(*argv, crash=False, **popen):
         from meshcurv import cli
         if {crash!r}:
             import test_faults_batch
-            cli._run_one = test_faults_batch.crashing_run_one
+            cli.batch.run_one = test_faults_batch.crashing_run_one
         sys.exit(cli.main(sys.argv[1:]))
         """)
     popen = {"stdout": subprocess.PIPE, "stderr": subprocess.PIPE, **popen}

@@ -140,10 +140,11 @@ def test_annotated_laz_is_refused_before_computing(annotated, tmp_path, capsys, 
 def test_annotated_laz_is_refused_by_a_tiled_run_before_the_cluster_starts(annotated, tmp_path,
                                                                           capsys, monkeypatch):
     import meshcurv.tiled as tiled
+    from meshcurv.tiled import run
 
     path, _ = annotated
     out = str(tmp_path / "twice.laz")
-    monkeypatch.setattr(tiled, "_dask_client", _no_computation)
+    monkeypatch.setattr(run, "dask_client", _no_computation)
     with pytest.raises(ValueError, match="already has dimension"):
         tiled.annotate_tiled(path, out, 2.0, 20.0)
     assert cli.main(["annotate", path, "-o", out, "--radius", "2", "--tile-size", "20"]) == 1

@@ -291,16 +291,16 @@ def test_failed_tile_is_named_leaves_no_output_and_rerun_resumes(client, laz_inp
 
 def _die_on_tile(tile):
     """Replace the curvature task in this worker by one that kills the process on ``tile``."""
-    import meshcurv.tiled as tiled
+    from meshcurv.tiled import tasks
 
-    task = tiled._curvature_task
+    task = tasks.curvature_task
 
     def dying(name, *args, **kwargs):
         if name == tile:
             os._exit(1)
         return task(name, *args, **kwargs)
 
-    tiled._curvature_task = dying
+    tasks.curvature_task = dying
 
 
 def _set_allowed_failures(dask_scheduler, count):
@@ -362,12 +362,12 @@ def test_bad_arguments_are_refused_before_any_work(laz_input, tmp_path):
 
 
 def test_default_tile_size_of_a_flat_cloud_is_a_few_radii_not_zero():
-    from meshcurv.tiled import _default_tile_size
+    from meshcurv.tiled.grid import default_tile_size
 
     # a line of points 100 long: one radius wide, 10^6 points per tile of 50 square units
-    assert _default_tile_size(10 ** 6, (100.0, 0.0), radius=0.5) == pytest.approx(50 ** 0.5)
-    assert _default_tile_size(10 ** 6, (1.0, 0.0), radius=0.5) == 2.0         # floor: 4 radii
-    assert _default_tile_size(4 * 10 ** 6, (400.0, 400.0), radius=0.5) == 200.0
+    assert default_tile_size(10 ** 6, (100.0, 0.0), radius=0.5) == pytest.approx(50 ** 0.5)
+    assert default_tile_size(10 ** 6, (1.0, 0.0), radius=0.5) == 2.0         # floor: 4 radii
+    assert default_tile_size(4 * 10 ** 6, (400.0, 400.0), radius=0.5) == 200.0
 
 
 def test_unreachable_scheduler_fails_in_one_line_and_leaves_no_work_folder(laz_input, tmp_path,

@@ -168,6 +168,8 @@ def test_running_the_filter_again_replaces_the_attributes(torus):
     ({"radius": -1.0}, "positive"),
     ({"radius": "2%"}, "PercentageValue"),
     ({"normals": "mesh"}, "normals"),
+    ({"ndirections": 2}, "n_directions must be a whole number from 3 to 64"),
+    ({"neighborhood": "rings"}, "neighborhood must be one of"),
 ])
 def test_bad_parameters_raise_valueerror_before_touching_the_mesh(cloud, kwargs, message):
     ms = _meshset(cloud)

@@ -85,7 +85,8 @@ def check_annotate_options(options):
             raise ValueError(f"--quality must be one of {', '.join(shape.FIELDS)}")
         if options.colormap.lower() not in (c.lower() for c in shape.COLORMAPS):
             raise ValueError(f"--colormap must be one of {', '.join(shape.COLORMAPS)}")
-        check_options(n_directions=options.directions, neighborhood=options.neighborhood)
+        check_options(n_directions=options.directions, neighborhood=options.neighborhood,
+                      orientation="mst" if options.viewpoint is None else options.viewpoint)
     except ValueError as exc:
         raise CommandError(str(exc), 2) from None
 

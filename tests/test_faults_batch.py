@@ -183,12 +183,18 @@ def test_a_batch_into_its_input_folder_never_annotates_its_outputs(tmp_path, cap
     assert sorted(os.listdir(d)) == ["a_curvature.ply", "b.ply", "b_curvature.ply"]
 
 
-def test_outputs_of_this_run_in_another_input_folder_are_skipped(tmp_path, capsys):
+def _batch_of_one(tmp_path):
+    """``in/a.ply`` annotated by a batch into ``out``; returns the two folders."""
     d = tmp_path / "in"
     d.mkdir()
     _sphere(d / "a.ply", subdivisions=2)
     out = tmp_path / "out"
     assert cli.main(["batch", str(d), "-O", str(out)]) == 0
+    return d, out
+
+
+def test_outputs_of_this_run_in_another_input_folder_are_skipped(tmp_path, capsys):
+    d, out = _batch_of_one(tmp_path)
     capsys.readouterr()
     # the out folder given as an input too: its a_curvature.ply is a's output, so skipped
     assert cli.main(["batch", str(d), str(out), "-O", str(out), "--overwrite"]) == 0
@@ -379,11 +385,7 @@ def test_a_write_killed_by_sigkill_is_cleaned_by_the_next_write(tmp_path):
 
 
 def test_a_batch_rerun_removes_stale_temporary_files_of_skipped_outputs(tmp_path, capsys):
-    d = tmp_path / "in"
-    d.mkdir()
-    _sphere(d / "a.ply", subdivisions=2)
-    out = tmp_path / "out"
-    assert cli.main(["batch", str(d), "-O", str(out)]) == 0
+    d, out = _batch_of_one(tmp_path)
     # an --overwrite run killed while rewriting a_curvature.ply left its temporary file
     stale = out / f".a_curvature.ply.{io._host_tag()}.{_dead_pid()}.k3j9x2q1.part"
     stale.write_bytes(b"partial")

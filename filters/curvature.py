@@ -88,7 +88,7 @@ def compute_curvature_cga_per_vertex(self, radius=None, ndirections=8, neighborh
     Parameter list:
 
     radius : PercentageValue | PureValue | float = None
-        Neighbourhood radius. ``PercentageValue(p)``: p % of the bounding-box diagonal;
+        Neighborhood radius. ``PercentageValue(p)``: p % of the bounding-box diagonal;
         ``PureValue(r)`` or a float: model units; None: the radius whose ball holds about 100
         points (works at any mesh size and sampling). PureValue and PercentageValue hold single
         precision and are read as the decimal typed (see :func:`resolve_radius`).
@@ -108,7 +108,7 @@ def compute_curvature_cga_per_vertex(self, radius=None, ndirections=8, neighborh
         'auto': for point clouds the mesh's own vertex normals when all are non-zero (loaded
         from file or computed by a MeshLab filter), else estimated; for triangle meshes
         estimated as :func:`meshcurv.principal_curvatures` does by default (PCA over the
-        neighbourhood, oriented by the faces, refined by a local quadric where the data are
+        neighborhood, oriented by the faces, refined by a local quadric where the data are
         clean). 'mesh': always the mesh's vertex normals. 'estimate': always estimated (as
         above for meshes; PCA over the same ball plus an MST orientation for point clouds).
     slab : float = 0.25

@@ -272,7 +272,7 @@ def test_ctrl_c_of_a_tiled_run_is_one_line_exit_130_and_no_process_left(tmp_path
 
 def test_tiled_run_of_a_quantized_georeferenced_cloud_equals_the_untiled_run_bit_for_bit():
     """LAS coordinates are multiples of the scale, so many points have z exactly 0: on a wall of
-    the neighbour grid. Cells counted from the cloud's corner binned them by the rounding of
+    the neighbor grid. Cells counted from the cloud's corner binned them by the rounding of
     z - (the first wall), which differed between a tile and the whole cloud (1 % of 200k points
     off by up to 8e-15 in curvature); cells counted from 0 bin them alike, so tiles equal the
     untiled run bit for bit, as the README says.

@@ -110,7 +110,7 @@ def test_percentage_and_pure_radius_give_the_same_result(torus):
     assert sb["radius_used"] == pytest.approx(sa["radius_used"], rel=1e-7)
     # MeshLab's own bounding box (single precision) is the one the percentage refers to
     assert a.current_mesh().bounding_box().diagonal() == pytest.approx(diagonal, rel=1e-6)
-    # a 1e-7 relative change of the radius moves the fits by about as much (no neighbour of
+    # a 1e-7 relative change of the radius moves the fits by about as much (no neighbor of
     # this torus lies that close to the ball's surface), far below rtol
     for name in FIELDS:
         np.testing.assert_allclose(a.current_mesh().vertex_custom_scalar_attribute_array(name),

@@ -42,7 +42,7 @@ vertices without an estimate have NaN curvature, valid = 0, quality 0 and a grey
 Exit codes: 0 success, 1 a file could not be processed, 2 command-line error."""
 
 
-_RADIUS_HELP = ("neighbourhood radius: a number in model units (0.05) or a percentage of the "
+_RADIUS_HELP = ("neighborhood radius: a number in model units (0.05) or a percentage of the "
                 "bounding-box diagonal (2%%); default: the radius whose ball holds ~100 points")
 
 
@@ -57,7 +57,7 @@ def _add_estimation_options(p):
                         "ball: all points within R; auto: kring for meshes, ball for clouds")
     g.add_argument("--normals", choices=("auto", "file", "estimate"), default="auto",
                    help="auto: a point cloud's own normals if the file has them, else "
-                        "estimated (PCA over the neighbourhood, oriented by the faces for "
+                        "estimated (PCA over the neighborhood, oriented by the faces for "
                         "meshes, by --viewpoint or a spanning tree for clouds); "
                         "file: require the file's normals; estimate: ignore them")
     g.add_argument("--viewpoint", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),

@@ -36,7 +36,7 @@ def info_text(path):
     if "n_neighbors" in data.fields:
         nb = np.asarray(data.fields["n_neighbors"])[valid]
         if nb.size:
-            lines.append(f"neighbours per vertex: median {np.median(nb):.0f}, "
+            lines.append(f"neighbors per vertex: median {np.median(nb):.0f}, "
                          f"min {nb.min()}, max {nb.max()}")
     return "\n".join(lines)
 

@@ -3,9 +3,9 @@
 The cloud is cut into square tiles of side ``tile_size`` in x, y (columns, unbounded in z). A tile
 task gets the tile's own points plus every point within the halo (``>= radius``, which is also the
 PCA-normal radius) of the tile, in input order, and estimates curvature at its own points only
-(``principal_curvatures(..., query=own)``). The neighbour lists of the own points then hold the
+(``principal_curvatures(..., query=own)``). The neighbor lists of the own points then hold the
 same points as in a whole-cloud run, so a tile's values are those of the untiled run with the
-same normals, bit for bit: the neighbour search bins points into cells counted from 0 in
+same normals, bit for bit: the neighbor search bins points into cells counted from 0 in
 model units (``floor(x / cell)``), not from the corner of the points present, so a point exactly on
 a cell wall (z = 0 in a quantized LAS file) falls in the same cell in a tile as in the whole cloud
 and every ball is listed, and summed, in the same order.
@@ -37,7 +37,7 @@ Normal orientation across tiles
 - ``orientation=(x, y, z)`` viewpoint: every normal is flipped towards that scanner position,
   so tiles agree by construction and the result equals the untiled run;
 - ``orientation="mst"``: each tile orients its tile + halo by minimum-spanning-tree propagation
-  (:func:`meshcurv.normals.orient_mst`). A tile's halo points are its neighbours' own points, so
+  (:func:`meshcurv.normals.orient_mst`). A tile's halo points are its neighbors' own points, so
   each pair of adjacent tiles votes ``sum(n_A . n_B)`` over their shared points; the driver then
   flips whole tiles along a maximum spanning tree of the tile graph (strongest overlaps first)
   and finally flips each connected group of tiles so its normals point away from its centroid on

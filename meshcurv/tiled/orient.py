@@ -15,7 +15,7 @@ def tile_flips(work, names):
     """+1/-1 per tile so that tiles agree in their overlaps and each group points outward.
 
     ``work``: the work folder (``normals/<tile>.npz|.json`` of every tile in ``names``).
-    Reads the overlap data of one tile and its neighbours' border bands at a time, so the
+    Reads the overlap data of one tile and its neighbors' border bands at a time, so the
     driver's memory is bounded by a few tiles' borders.
     """
     if not names:

@@ -361,15 +361,6 @@ def test_bad_arguments_are_refused_before_any_work(laz_input, tmp_path):
     assert os.listdir(tmp_path) == []
 
 
-def test_default_tile_size_of_a_flat_cloud_is_a_few_radii_not_zero():
-    from meshcurv.tiled.grid import default_tile_size
-
-    # a line of points 100 long: one radius wide, 10^6 points per tile of 50 square units
-    assert default_tile_size(10 ** 6, (100.0, 0.0), radius=0.5) == pytest.approx(50 ** 0.5)
-    assert default_tile_size(10 ** 6, (1.0, 0.0), radius=0.5) == 2.0         # floor: 4 radii
-    assert default_tile_size(4 * 10 ** 6, (400.0, 400.0), radius=0.5) == 200.0
-
-
 def test_unreachable_scheduler_fails_in_one_line_and_leaves_no_work_folder(laz_input, tmp_path,
                                                                           monkeypatch):
     distributed = pytest.importorskip("distributed")

@@ -16,14 +16,12 @@ import sys
 import numpy as np
 
 from .. import io, shape
-from .annotate import (AnnotateOptions, CommandError, annotate_file, check_annotate_options,
-                       parse_radius)
+from .annotate import AnnotateOptions, CommandError, annotate_file, check_annotate_options
 from .batch import BatchInterrupted, failure_text, run_batch
 from .info import info_text
 from .tiles import annotate_tiled_command, check_las_output
 
-__all__ = ["main", "build_parser", "AnnotateOptions", "parse_radius", "annotate_file",
-           "run_batch", "info_text"]
+__all__ = ["main", "build_parser", "AnnotateOptions", "annotate_file", "run_batch", "info_text"]
 
 _DESCRIPTION = """\
 Principal curvatures of meshes and point clouds by CGA circle fits (Seibert et al.).

@@ -46,6 +46,11 @@ Normal orientation across tiles
   same normals with ``refine_normals=True``; the normals agree
   with an untiled MST run wherever the propagation itself agrees (smooth, well-sampled surfaces).
 
+Modules: ``grid`` (TileGrid: tiles, halo, memberships), ``work`` (the work folder: manifest,
+atomic npz/json, pieces and results), ``tasks`` (the scatter, normals and curvature tasks),
+``orient`` (the flips that make MST normals agree across tiles), ``cluster`` (Dask: connect,
+LocalCluster, running a stage's tasks), ``run`` (the two drivers).
+
 >>> from meshcurv.tiled import annotate_tiled                                  # doctest: +SKIP
 >>> annotate_tiled("big.laz", "big_curv.laz", radius=0.5, tile_size=50.0,
 ...                orientation=(0.0, 0.0, 1000.0))                           # doctest: +SKIP

@@ -13,7 +13,7 @@ import numpy as np
 
 from meshcurv import io, shape
 
-from .curvature import _has_attribute, _store_point, _store_scalar
+from .attributes import has_attribute, store_point, store_scalar
 
 __all__ = ["save_curvature_mesh", "load_curvature_mesh"]
 
@@ -54,8 +54,8 @@ def save_curvature_mesh(ms, path):
     mesh = ms.current_mesh()
     scalar = mesh.vertex_custom_scalar_attribute_array
     point = mesh.vertex_custom_point_attribute_matrix
-    missing = [f for f in shape.FIELDS + ("valid",) if not _has_attribute(scalar, f)]
-    missing += [f for f in ("d1", "d2") if not _has_attribute(point, f)]
+    missing = [f for f in shape.FIELDS + ("valid",) if not has_attribute(scalar, f)]
+    missing += [f for f in ("d1", "d2") if not has_attribute(point, f)]
     if missing:
         raise ValueError("save_curvature_mesh: the current mesh has no curvature attribute "
                          f"{', '.join(missing)}; run ms.compute_curvature_cga_per_vertex(...) "
@@ -70,7 +70,7 @@ def save_curvature_mesh(ms, path):
         for i, c in enumerate("xyz"):
             fields[name + c] = values[:, i]
     for f, dtype in _DIAGNOSTICS.items():
-        if _has_attribute(scalar, f):
+        if has_attribute(scalar, f):
             fields[f] = scalar(f).astype(dtype)
     if mesh.has_vertex_scalar():
         fields["quality"] = mesh.vertex_scalar_array()
@@ -112,8 +112,8 @@ def load_curvature_mesh(ms, path):
                          f"has {len(data.vertices)}")
     for f in shape.FIELDS + ("valid",) + tuple(_DIAGNOSTICS):
         if f in data.fields:
-            _store_scalar(ms, f, np.asarray(data.fields[f], dtype=np.float64))
+            store_scalar(ms, f, np.asarray(data.fields[f], dtype=np.float64))
     for name in ("d1", "d2"):
         cols = [name + c for c in "xyz"]
         if all(c in data.fields for c in cols):
-            _store_point(ms, name, np.column_stack([data.fields[c] for c in cols]))
+            store_point(ms, name, np.column_stack([data.fields[c] for c in cols]))

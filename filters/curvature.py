@@ -12,6 +12,9 @@ import pymeshlab
 
 from meshcurv import principal_curvatures, shape
 from meshcurv.io import bbox_diagonal, usable_normals
+from meshcurv.options import check_options
+
+from .attributes import store_point, store_scalar
 
 __all__ = ["compute_curvature_cga_per_vertex", "resolve_radius"]
 
@@ -53,55 +56,6 @@ def resolve_radius(radius, vertices):
     return float(value)
 
 
-def _has_attribute(read, name):
-    """Whether the mesh has the custom attribute ``name``; ``read`` is its reader method
-    (``mesh.vertex_custom_scalar_attribute_array`` or ``..._point_attribute_matrix``)."""
-    try:
-        read(name)
-        return True
-    except pymeshlab.PyMeshLabException:
-        return False
-
-
-def _fresh_name(mesh, stem):
-    k = 0
-    while _has_attribute(mesh.vertex_custom_scalar_attribute_array, f"{stem}_{k}"):
-        k += 1
-    return f"{stem}_{k}"
-
-
-def _store_scalar(ms, name, values):
-    """Set the custom scalar attribute ``name`` of the current mesh to ``values`` (float64).
-
-    MeshLab cannot replace an attribute's data from Python, so when ``name`` exists (the filter
-    ran before) the new values go into a carrier attribute that MeshLab's expression filter
-    copies over, exactly (double precision).
-    """
-    mesh = ms.current_mesh()
-    values = np.ascontiguousarray(values, dtype=np.float64)
-    if not _has_attribute(mesh.vertex_custom_scalar_attribute_array, name):
-        mesh.add_vertex_custom_scalar_attribute(values, name)
-        return
-    carrier = _fresh_name(mesh, "meshcurv_tmp")
-    mesh.add_vertex_custom_scalar_attribute(values, carrier)
-    ms.compute_new_custom_scalar_attribute_per_vertex(name=name, expr=carrier)
-
-
-def _store_point(ms, name, values):
-    """Set the custom point attribute ``name`` of the current mesh to (n, 3) ``values``."""
-    mesh = ms.current_mesh()
-    values = np.ascontiguousarray(values, dtype=np.float64)
-    if not _has_attribute(mesh.vertex_custom_point_attribute_matrix, name):
-        mesh.add_vertex_custom_point_attribute(values, name)
-        return
-    carriers = []
-    for i in range(3):
-        carriers.append(_fresh_name(ms.current_mesh(), "meshcurv_tmp"))
-        ms.current_mesh().add_vertex_custom_scalar_attribute(values[:, i], carriers[-1])
-    ms.compute_new_custom_point_attribute_per_vertex(name=name, x_expr=carriers[0],
-                                                     y_expr=carriers[1], z_expr=carriers[2])
-
-
 def compute_curvature_cga_per_vertex(self, radius=None, ndirections=8, neighborhood="auto",
                                      quality="mean", colormap="Turbo", clamp=2.0,
                                      normals="auto", slab=0.25):
@@ -134,7 +88,7 @@ def compute_curvature_cga_per_vertex(self, radius=None, ndirections=8, neighborh
     Parameter list:
 
     radius : PercentageValue | PureValue | float = None
-        Neighbourhood radius. ``PercentageValue(p)``: p % of the bounding-box diagonal;
+        Neighborhood radius. ``PercentageValue(p)``: p % of the bounding-box diagonal;
         ``PureValue(r)`` or a float: model units; None: the radius whose ball holds about 100
         points (works at any mesh size and sampling). PureValue and PercentageValue hold single
         precision and are read as the decimal typed (see :func:`resolve_radius`).
@@ -154,7 +108,7 @@ def compute_curvature_cga_per_vertex(self, radius=None, ndirections=8, neighborh
         'auto': for point clouds the mesh's own vertex normals when all are non-zero (loaded
         from file or computed by a MeshLab filter), else estimated; for triangle meshes
         estimated as :func:`meshcurv.principal_curvatures` does by default (PCA over the
-        neighbourhood, oriented by the faces, refined by a local quadric where the data are
+        neighborhood, oriented by the faces, refined by a local quadric where the data are
         clean). 'mesh': always the mesh's vertex normals. 'estimate': always estimated (as
         above for meshes; PCA over the same ball plus an MST orientation for point clouds).
     slab : float = 0.25
@@ -176,13 +130,7 @@ def compute_curvature_cga_per_vertex(self, radius=None, ndirections=8, neighborh
     ...                                           quality="shape_index")   # doctest: +SKIP
     >>> meshcurv.filters.save_curvature_mesh(ms, "torus_si.ply")           # doctest: +SKIP
     """
-    if quality not in shape.FIELDS:
-        raise ValueError(f"quality must be one of {', '.join(shape.FIELDS)}, got {quality!r}")
-    cmap = _MESHLAB_COLORMAPS.get(str(colormap).lower())
-    if cmap is None:
-        raise ValueError(f"colormap must be one of {', '.join(shape.COLORMAPS)}, got {colormap!r}")
-    if normals not in ("auto", "mesh", "estimate"):
-        raise ValueError(f"normals must be 'auto', 'mesh' or 'estimate', got {normals!r}")
+    cmap = _check_parameters(quality, colormap, normals, ndirections, neighborhood)
     mesh = self.current_mesh()
     if not mesh.is_compact():
         mesh.compact()  # drops vertices MeshLab already marked deleted; the rest keep order
@@ -191,16 +139,7 @@ def compute_curvature_cga_per_vertex(self, radius=None, ndirections=8, neighborh
         raise ValueError("compute_curvature_cga_per_vertex: the current mesh has no vertices")
     f = mesh.face_matrix()
     point_cloud = len(f) == 0
-    mesh_normals = mesh.vertex_normal_matrix()
-    given = None
-    if normals == "mesh":
-        if not usable_normals(mesh_normals):
-            raise ValueError("normals='mesh' but the current mesh has zero or non-finite "
-                             "vertex normals")
-        given = mesh_normals
-    elif normals == "auto" and point_cloud and usable_normals(mesh_normals):
-        given = mesh_normals
-
+    given = _given_normals(mesh, normals, point_cloud)
     with warnings.catch_warnings():
         # pymeshlab ships an older TBB than numba accepts; numba then falls back to OpenMP
         # but warns about it on its first parallel launch, which is noise for a filter user
@@ -209,24 +148,8 @@ def compute_curvature_cga_per_vertex(self, radius=None, ndirections=8, neighborh
                                    radius=resolve_radius(radius, v),
                                    n_directions=int(ndirections), neighborhood=neighborhood,
                                    slab=float(slab))
-
     fields = {name: getattr(res, name) for name in shape.FIELDS}
-    for name, values in fields.items():
-        _store_scalar(self, name, values)
-    _store_scalar(self, "valid", res.valid.astype(np.float64))
-    _store_point(self, "d1", res.d1)
-    _store_point(self, "d2", res.d2)
-
-    # quality: NaN would break MeshLab's ramps and statistics, so invalid vertices read 0
-    self.compute_scalar_by_function_per_vertex(q=f"({quality} == {quality}) ? {quality} : 0")
-    lo, hi = shape.color_range(fields[quality], quality, clamp)
-    self.compute_color_from_scalar_per_vertex(minval=lo, maxval=hi, perc=0, zerosym=False,
-                                              colormap=cmap)
-    if not res.valid.all():
-        self.compute_color_by_function_per_vertex(
-            x=f"valid > 0 ? r : {_GREY}", y=f"valid > 0 ? g : {_GREY}",
-            z=f"valid > 0 ? b : {_GREY}", a="a")
-
+    lo, hi = _store_result(self, res, fields, quality, cmap, clamp)
     ok = res.valid
     summary = {"radius_used": float(res.radius), "n_vertices": int(len(v)),
                "n_valid": int(ok.sum()), "n_invalid": int((~ok).sum()),
@@ -237,3 +160,50 @@ def compute_curvature_cga_per_vertex(self, radius=None, ndirections=8, neighborh
         summary[f"{name}_min"] = float(x.min()) if x.size else float("nan")
         summary[f"{name}_max"] = float(x.max()) if x.size else float("nan")
     return summary
+
+
+def _check_parameters(quality, colormap, normals, ndirections, neighborhood):
+    """ValueError (one line) for a parameter no mesh can fix, before the mesh is touched;
+    returns MeshLab's spelling of ``colormap``. Estimator options: :func:`check_options`."""
+    if quality not in shape.FIELDS:
+        raise ValueError(f"quality must be one of {', '.join(shape.FIELDS)}, got {quality!r}")
+    cmap = _MESHLAB_COLORMAPS.get(str(colormap).lower())
+    if cmap is None:
+        raise ValueError(f"colormap must be one of {', '.join(shape.COLORMAPS)}, got {colormap!r}")
+    if normals not in ("auto", "mesh", "estimate"):
+        raise ValueError(f"normals must be 'auto', 'mesh' or 'estimate', got {normals!r}")
+    check_options(n_directions=ndirections, neighborhood=neighborhood)
+    return cmap
+
+
+def _given_normals(mesh, normals, point_cloud):
+    """The mesh's vertex normals (n, 3) if the ``normals`` parameter takes them, else None."""
+    mesh_normals = mesh.vertex_normal_matrix()
+    if normals == "mesh":
+        if not usable_normals(mesh_normals):
+            raise ValueError("normals='mesh' but the current mesh has zero or non-finite "
+                             "vertex normals")
+        return mesh_normals
+    if normals == "auto" and point_cloud and usable_normals(mesh_normals):
+        return mesh_normals
+    return None
+
+
+def _store_result(ms, res, fields, quality, cmap, clamp):
+    """Write the curvature attributes, quality and colours of ``res`` to the current mesh;
+    returns the (lo, hi) range of the colour ramp."""
+    for name, values in fields.items():
+        store_scalar(ms, name, values)
+    store_scalar(ms, "valid", res.valid.astype(np.float64))
+    store_point(ms, "d1", res.d1)
+    store_point(ms, "d2", res.d2)
+    # quality: NaN would break MeshLab's ramps and statistics, so invalid vertices read 0
+    ms.compute_scalar_by_function_per_vertex(q=f"({quality} == {quality}) ? {quality} : 0")
+    lo, hi = shape.color_range(fields[quality], quality, clamp)
+    ms.compute_color_from_scalar_per_vertex(minval=lo, maxval=hi, perc=0, zerosym=False,
+                                            colormap=cmap)
+    if not res.valid.all():
+        ms.compute_color_by_function_per_vertex(
+            x=f"valid > 0 ? r : {_GREY}", y=f"valid > 0 ? g : {_GREY}",
+            z=f"valid > 0 ? b : {_GREY}", a="a")
+    return lo, hi

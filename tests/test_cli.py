@@ -185,6 +185,7 @@ def test_bad_input_fails_in_one_line_naming_the_file_and_writes_nothing(tmp_path
     (["--radius", "-2"], "radius must be positive"),
     (["--radius", "two"], "radius must be a number"),
     (["--directions", "2"], "from 3 to 64"),
+    (["--viewpoint", "nan", "0", "10"], "finite (3,) viewpoint"),
     (["--colormap", "Jet"], "--colormap"),
     (["-o", "{in}"], "refusing to overwrite the input"),
     (["-o", "{tmp}/x.obj"], "output must be"),

@@ -3,8 +3,8 @@ and parallel, and a rerun retries only it; outputs are never inputs and never re
 workers die with a killed parent and Ctrl-C stops everything with one line; temporary files of
 killed writes are removed by the next write, never those of a live process.
 
-Crashes are produced by :func:`crashing_run_one`, put in place of ``cli._run_one`` in a batch
-run in a subprocess: the workers import it by name from this module, so it crashes inside the
+Crashes are produced by :func:`crashing_run_one`, put in place of ``cli.batch.run_one`` in a
+batch run in a subprocess: the workers import it by name from this module, so it crashes inside the
 worker exactly where a segmentation fault of the estimator would (no test hook in meshcurv)."""
 
 import os
@@ -19,10 +19,11 @@ import time
 import pytest
 
 from meshcurv import cli, io, surfaces
-from meshcurv.batch import WorkerPool, crash_reason
+from meshcurv.cli import batch
+from meshcurv.cli.batch import WorkerPool, crash_reason
 
 TESTS = os.path.dirname(os.path.abspath(__file__))
-_REAL_RUN_ONE = cli._run_one
+_REAL_RUN_ONE = batch.run_one
 COMPILING = "meshcurv: compiling the numba kernels"
 
 
@@ -41,7 +42,7 @@ def _crash(kind):
 
 
 def crashing_run_one(input_path, output_path, options):
-    """``cli._run_one``, except that an input named segv/abort/exit/oom.* kills the worker."""
+    """``cli.batch.run_one``, except that an input named segv/abort/exit/oom.* kills the worker."""
     kind = os.path.splitext(os.path.basename(input_path))[0]
     if kind in ("segv", "abort", "exit", "oom"):
         _crash(kind)
@@ -65,7 +66,7 @@ def run_cli(*argv, crash=False, **popen):
         from meshcurv import cli
         if {crash!r}:
             import test_faults_batch
-            cli._run_one = test_faults_batch.crashing_run_one
+            cli.batch.run_one = test_faults_batch.crashing_run_one
         sys.exit(cli.main(sys.argv[1:]))
         """)
     popen = {"stdout": subprocess.PIPE, "stderr": subprocess.PIPE, **popen}
@@ -182,12 +183,18 @@ def test_a_batch_into_its_input_folder_never_annotates_its_outputs(tmp_path, cap
     assert sorted(os.listdir(d)) == ["a_curvature.ply", "b.ply", "b_curvature.ply"]
 
 
-def test_outputs_of_this_run_in_another_input_folder_are_skipped(tmp_path, capsys):
+def _batch_of_one(tmp_path):
+    """``in/a.ply`` annotated by a batch into ``out``; returns the two folders."""
     d = tmp_path / "in"
     d.mkdir()
     _sphere(d / "a.ply", subdivisions=2)
     out = tmp_path / "out"
     assert cli.main(["batch", str(d), "-O", str(out)]) == 0
+    return d, out
+
+
+def test_outputs_of_this_run_in_another_input_folder_are_skipped(tmp_path, capsys):
+    d, out = _batch_of_one(tmp_path)
     capsys.readouterr()
     # the out folder given as an input too: its a_curvature.ply is a's output, so skipped
     assert cli.main(["batch", str(d), str(out), "-O", str(out), "--overwrite"]) == 0
@@ -378,11 +385,7 @@ def test_a_write_killed_by_sigkill_is_cleaned_by_the_next_write(tmp_path):
 
 
 def test_a_batch_rerun_removes_stale_temporary_files_of_skipped_outputs(tmp_path, capsys):
-    d = tmp_path / "in"
-    d.mkdir()
-    _sphere(d / "a.ply", subdivisions=2)
-    out = tmp_path / "out"
-    assert cli.main(["batch", str(d), "-O", str(out)]) == 0
+    d, out = _batch_of_one(tmp_path)
     # an --overwrite run killed while rewriting a_curvature.ply left its temporary file
     stale = out / f".a_curvature.ply.{io.atomic.host_tag()}.{_dead_pid()}.k3j9x2q1.part"
     stale.write_bytes(b"partial")

@@ -141,10 +141,11 @@ def test_annotated_laz_is_refused_before_computing(annotated, tmp_path, capsys, 
 def test_annotated_laz_is_refused_by_a_tiled_run_before_the_cluster_starts(annotated, tmp_path,
                                                                           capsys, monkeypatch):
     import meshcurv.tiled as tiled
+    from meshcurv.tiled import run
 
     path, _ = annotated
     out = str(tmp_path / "twice.laz")
-    monkeypatch.setattr(tiled, "_dask_client", _no_computation)
+    monkeypatch.setattr(run, "dask_client", _no_computation)
     with pytest.raises(ValueError, match="already has dimension"):
         tiled.annotate_tiled(path, out, 2.0, 20.0)
     assert cli.main(["annotate", path, "-o", out, "--radius", "2", "--tile-size", "20"]) == 1
@@ -272,7 +273,7 @@ def test_ctrl_c_of_a_tiled_run_is_one_line_exit_130_and_no_process_left(tmp_path
 
 def test_tiled_run_of_a_quantized_georeferenced_cloud_equals_the_untiled_run_bit_for_bit():
     """LAS coordinates are multiples of the scale, so many points have z exactly 0: on a wall of
-    the neighbour grid. Cells counted from the cloud's corner binned them by the rounding of
+    the neighbor grid. Cells counted from the cloud's corner binned them by the rounding of
     z - (the first wall), which differed between a tile and the whole cloud (1 % of 200k points
     off by up to 8e-15 in curvature); cells counted from 0 bin them alike, so tiles equal the
     untiled run bit for bit, as the README says.

@@ -110,7 +110,7 @@ def test_percentage_and_pure_radius_give_the_same_result(torus):
     assert sb["radius_used"] == pytest.approx(sa["radius_used"], rel=1e-7)
     # MeshLab's own bounding box (single precision) is the one the percentage refers to
     assert a.current_mesh().bounding_box().diagonal() == pytest.approx(diagonal, rel=1e-6)
-    # a 1e-7 relative change of the radius moves the fits by about as much (no neighbour of
+    # a 1e-7 relative change of the radius moves the fits by about as much (no neighbor of
     # this torus lies that close to the ball's surface), far below rtol
     for name in FIELDS:
         np.testing.assert_allclose(a.current_mesh().vertex_custom_scalar_attribute_array(name),
@@ -168,6 +168,8 @@ def test_running_the_filter_again_replaces_the_attributes(torus):
     ({"radius": -1.0}, "positive"),
     ({"radius": "2%"}, "PercentageValue"),
     ({"normals": "mesh"}, "normals"),
+    ({"ndirections": 2}, "n_directions must be a whole number from 3 to 64"),
+    ({"neighborhood": "rings"}, "neighborhood must be one of"),
 ])
 def test_bad_parameters_raise_valueerror_before_touching_the_mesh(cloud, kwargs, message):
     ms = _meshset(cloud)

@@ -49,9 +49,9 @@ def wavy_cloud(n, side, seed=0, n_bad=0):
     return pts
 
 
-def radius_for(neighbours, density):
-    """Radius whose ball holds about ``neighbours`` points at ``density`` points per unit area."""
-    return float(np.sqrt(neighbours / (np.pi * density)))
+def radius_for(n_neighbors, density):
+    """Radius whose ball holds about ``n_neighbors`` points at ``density`` points per unit area."""
+    return float(np.sqrt(n_neighbors / (np.pi * density)))
 
 
 def assert_same_result(tiled, untiled, atol=1e-12):
@@ -85,7 +85,7 @@ def write_las(path, xyz):
 
 # ----------------------------------------------------------------------------- equality, memory
 
-# 16 tiles of ~6 000 points each, ~30 neighbours per point; 40 non-finite rows.
+# 16 tiles of ~6 000 points each, ~30 neighbors per point; 40 non-finite rows.
 N_DEFAULT, SIDE_DEFAULT = 96_000, 310.0
 TILE = SIDE_DEFAULT / 4 * 1.0001
 
@@ -105,7 +105,7 @@ def default_run(client):
 def test_tiled_run_equals_untiled_run_with_viewpoint(default_run):
     pts, radius, tiled, untiled, report = default_run
     assert report.n_tiles == 16
-    # a tile's own points see exactly their whole-cloud neighbourhood, in the same order, so
+    # a tile's own points see exactly their whole-cloud neighborhood, in the same order, so
     # every value (normals included) is the same floating-point result: 1e-12 is pure margin
     assert_same_result(tiled, untiled, atol=1e-12)
     assert untiled.valid.mean() > 0.95
@@ -128,7 +128,7 @@ def test_tile_task_memory_is_bounded_by_the_tile_not_the_cloud(client, default_r
 
     n_total = peak(big_report, "n_total")
     # stated bound: the Python/numpy allocations of a tile task stay under 1.5 kB per point of
-    # tile + halo at ~30 neighbours (measured ~1.05 kB: neighbour lists, fits, results), with
+    # tile + halo at ~30 neighbors (measured ~1.05 kB: neighbor lists, fits, results), with
     # no term that grows with the cloud
     assert peak(big_report, "peak_traced_bytes") <= 1500.0 * n_total
     # the cloud grew 4x; the largest tile task grew only by its halo (interior vs corner tiles)
@@ -177,7 +177,7 @@ def test_two_million_points_in_16_tiles_equal_the_untiled_run_at_every_tile_bord
     two radii of a tile border (where tiling could go wrong) and 50 000 points elsewhere.
 
     ``query`` makes the untiled estimator compute exactly the whole-cloud values at those rows
-    (neighbours from all 2M points) at a fraction of the cost; the full comparison of all 2M
+    (neighbors from all 2M points) at a fraction of the cost; the full comparison of all 2M
     rows is the slow test below.
     """
     pts, radius, viewpoint = _big_cloud()
@@ -291,16 +291,16 @@ def test_failed_tile_is_named_leaves_no_output_and_rerun_resumes(client, laz_inp
 
 def _die_on_tile(tile):
     """Replace the curvature task in this worker by one that kills the process on ``tile``."""
-    import meshcurv.tiled as tiled
+    from meshcurv.tiled import tasks
 
-    task = tiled._curvature_task
+    task = tasks.curvature_task
 
     def dying(name, *args, **kwargs):
         if name == tile:
             os._exit(1)
         return task(name, *args, **kwargs)
 
-    tiled._curvature_task = dying
+    tasks.curvature_task = dying
 
 
 def _set_allowed_failures(dask_scheduler, count):
@@ -359,15 +359,6 @@ def test_bad_arguments_are_refused_before_any_work(laz_input, tmp_path):
     with pytest.raises(ValueError, match="sets"):
         principal_curvatures_tiled(xyz, radius, 30.0, query=[0])
     assert os.listdir(tmp_path) == []
-
-
-def test_default_tile_size_of_a_flat_cloud_is_a_few_radii_not_zero():
-    from meshcurv.tiled import _default_tile_size
-
-    # a line of points 100 long: one radius wide, 10^6 points per tile of 50 square units
-    assert _default_tile_size(10 ** 6, (100.0, 0.0), radius=0.5) == pytest.approx(50 ** 0.5)
-    assert _default_tile_size(10 ** 6, (1.0, 0.0), radius=0.5) == 2.0         # floor: 4 radii
-    assert _default_tile_size(4 * 10 ** 6, (400.0, 400.0), radius=0.5) == 200.0
 
 
 def test_unreachable_scheduler_fails_in_one_line_and_leaves_no_work_folder(laz_input, tmp_path,

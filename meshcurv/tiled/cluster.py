@@ -1,0 +1,162 @@
+"""Dask for tiled runs: connecting to a scheduler or starting a quiet LocalCluster, and running
+a stage's tasks with one-line failures."""
+
+import contextlib
+import logging
+import os
+import time
+
+from tqdm.auto import tqdm
+
+from ..io import las
+from ..io import first_line
+from .tasks import TileError
+
+__all__ = ["connect", "dask_client", "run_jobs"]
+
+
+@contextlib.contextmanager
+def connect(scheduler, timeout="20s"):
+    """A ``distributed.Client`` for ``scheduler``: an address (connected here, waiting at most
+    ``timeout``, and closed on exit) or an existing Client (used as is).
+
+    Raises OSError "cannot connect to the Dask scheduler <address>: <reason>" (one line).
+    """
+    if not isinstance(scheduler, str):
+        yield scheduler
+        return
+    from distributed import Client
+
+    try:
+        client = Client(scheduler, timeout=timeout)
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise OSError(f"cannot connect to the Dask scheduler {scheduler}: "
+                      f"{first_line(exc)}") from None
+    try:
+        yield client
+    finally:
+        client.close()
+
+
+@contextlib.contextmanager
+def dask_client(scheduler, n_workers, threads_per_task=None):
+    """(client, numba threads per task): the given Client, one connected to an address, or a
+    LocalCluster of ``n_workers`` one-thread processes, closed on exit.
+
+    Threads per task: ``threads_per_task`` if given; for the LocalCluster the cores shared out
+    among its workers; else None (numba's default, all cores of the worker's machine).
+    """
+    from distributed import Client, LocalCluster
+
+    if threads_per_task is not None and int(threads_per_task) < 1:
+        raise ValueError(f"threads_per_task must be at least 1, got {threads_per_task}")
+    if scheduler is not None:
+        with connect(scheduler) as client:
+            yield client, threads_per_task
+        return
+    n_workers = int(n_workers or min(os.cpu_count() or 1, 8))
+    cluster = None
+    try:
+        with _workers_ignore_sigint():
+            cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
+                                   dashboard_address=None)
+        with Client(cluster) as client:
+            client.run(_quiet_worker)
+            yield client, threads_per_task or max(1, (os.cpu_count() or 1) // n_workers)
+    except BaseException:
+        # interrupted or failed: the caller reports it in one line; the scheduler and nannies
+        # in this process would add warnings about the workers they stop
+        _set_distributed_log_level(logging.CRITICAL)
+        raise
+    finally:
+        if cluster is not None:
+            try:
+                cluster.close()
+            finally:
+                _set_distributed_log_level(None)
+
+
+@contextlib.contextmanager
+def _workers_ignore_sigint():
+    """Ignore SIGINT in this process while a LocalCluster starts its worker processes.
+
+    The workers inherit the ignored signal, so a Ctrl-C in the terminal (sent to the whole
+    process group) reaches only the driver, which closes the cluster and reports one line,
+    instead of every worker printing a KeyboardInterrupt traceback. A Ctrl-C during these
+    seconds of start-up is lost; workers restarted later get it again (see _quiet_worker).
+    """
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
+
+
+def _quiet_worker():
+    """Run in each worker process of our LocalCluster: the driver reports a failed task in one
+    line (tile and reason), so the worker's own log of it (a multi-line "Compute Failed" block)
+    and its warnings while the cluster shuts down are not printed. A Ctrl-C is for the driver."""
+    import signal
+    import threading
+
+    for name in ("distributed", "distributed.worker"):
+        logging.getLogger(name).setLevel(logging.CRITICAL)
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+_SAVED_LOG_LEVELS = {}
+
+
+def _set_distributed_log_level(level):
+    """Set the level of distributed's loggers in this process; None restores them."""
+    names = ("distributed", "distributed.scheduler", "distributed.nanny", "distributed.worker",
+             "distributed.core", "distributed.client", "distributed.deploy.spec")
+    for name in names:
+        logger = logging.getLogger(name)
+        if level is None:
+            if name in _SAVED_LOG_LEVELS:
+                logger.setLevel(_SAVED_LOG_LEVELS.pop(name))
+        else:
+            _SAVED_LOG_LEVELS.setdefault(name, logger.level)
+            logger.setLevel(level)
+
+
+def run_jobs(client, jobs, desc, unit, in_path, progress):
+    """Submit ``jobs`` ({name: (func, args, kwargs)}) and wait for all.
+
+    The first failure cancels the rest and is raised naming its tile or chunk and the file.
+    Returns {name: task result}.
+    """
+    from distributed import as_completed
+
+    token = f"{os.getpid()}-{time.time_ns()}"
+    futures = {client.submit(func, *args, key=f"meshcurv-{desc}-{name}-{token}", pure=False,
+                             **kwargs): name
+               for name, (func, args, kwargs) in jobs.items()}
+    results = {}
+    bar = tqdm(total=len(futures), desc=desc, unit=unit, disable=not progress)
+    try:
+        for fut in as_completed(futures):
+            name = futures[fut]
+            try:
+                results[name] = fut.result()
+            except (TileError, las.LasReadError):
+                raise
+            except Exception as e:  # KilledWorker, CommClosedError, ...: the worker is gone
+                raise TileError(f"{unit} {name} of {in_path}: {desc} task failed "
+                                f"({type(e).__name__}: {e})") from e
+            bar.update(1)
+    except BaseException:
+        client.cancel(list(futures))
+        raise
+    finally:
+        bar.close()
+    return results
+

@@ -7,7 +7,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 from tqdm.auto import tqdm
 
-from . import kernels, normals as nrm
+from . import normals as nrm
+from .fit import fused, jet
+from .normals import orient
 from .options import check_options
 from .result import CurvatureResult
 from .neighbors import (BallGrid, KringWork, ball_counts, ball_grid, ball_neighbors,
@@ -170,7 +172,7 @@ def _mst_normals(v, radius, neighbours, kernel_points, rank, progress, block=_BL
     for pos in _blocks(order, progress, "normals", block):
         indptr, indices = neighbours(pos)
         nv[pos] = nrm.pca_normals(kernel_points, v[pos], indptr, indices, radius)
-        near = kernels.nearest_in_lists(kernel_points, v[pos], indptr, indices, _TREE_NEIGHBOURS)
+        near = orient.nearest_in_lists(kernel_points, v[pos], indptr, indices, _TREE_NEIGHBOURS)
         graph[pos] = near if rank is None else np.where(near >= 0, rank[near], -1)
     return nrm.orient_mst(v, nv, neighbors=graph)
 
@@ -331,7 +333,7 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
         makes the two equal.
     refine_normals : bool or None, default None
         Refine the normals by a local quadric fit over the same neighbourhood before the
-        circle fits (:func:`meshcurv.kernels.local_jet`), mixed with the starting normal by
+        circle fits (:func:`meshcurv.jet.local_jet`), mixed with the starting normal by
         the measured noise (the mix of ``weighting="auto"``, :func:`weight_blend`, whatever
         ``weighting`` is): face and PCA normals
         tilt with irregular sampling (0.7 degrees on a random sphere, up to 3 % in
@@ -507,11 +509,11 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
         with np.errstate(invalid="ignore", divide="ignore"):
             qb = qb / np.linalg.norm(qb, axis=1, keepdims=True)
         start = qb.copy() if refine else None
-        kernels.local_jet(kernel_points, xb, qb, indptr, indices, radius, refine, b_noise[:b])
+        jet.local_jet(kernel_points, xb, qb, indptr, indices, radius, refine, b_noise[:b])
         beta = weight_blend(b_noise[:b], radius, "auto")
         if refine:
             qb = _mix_normals(start, qb, beta)
-        kernels.curvature_cga(
+        fused.curvature_cga(
             kernel_points, xb, qb, indptr, indices, radius, int(n_directions),
             float(slab), float(min_points), float(min_spread),
             beta if weighting == "auto" else weight_blend(b_noise[:b], radius, weighting),

@@ -14,7 +14,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import meshcurv
-from meshcurv import api, kernels, normals, options, reference
+from meshcurv import api, normals, options
+from meshcurv.fit import fused_spec
 from meshcurv.neighbors import ball_grid, ball_neighbors, default_radius, spatial_order
 
 # icosphere(3): 642 vertices; its own default radius, given explicitly to both runs
@@ -234,7 +235,7 @@ def test_reference_refuses_a_fan_rim_as_the_kernel_does():
     for i in (5, 20):
         nb = v[np.linalg.norm(v - v[i], axis=1) <= 0.6]
         for blend in (0.0, 1.0):
-            out = reference.curvature_at_point(v[i], [0, 0, 1.0], nb, 0.6, blend=blend)
+            out = fused_spec.curvature_at_point(v[i], [0, 0, 1.0], nb, 0.6, blend=blend)
             assert np.isnan(out["k1"])
 
 

@@ -1,28 +1,19 @@
-"""Plain numpy reference of the estimator, one point at a time.
+"""Numpy specification of the fused estimator, one point at a time.
 
-Slow and readable: the paper's steps for a single point, built from :mod:`meshcurv.cga` and
-:mod:`meshcurv.sinefit`. It exists to check the compiled kernel
-(:func:`meshcurv.kernels.curvature_cga`), which must agree with it to round-off.
+Slow and readable: the paper's steps for a single point, built from the other specifications
+(:mod:`~meshcurv.fit.frame_spec`, :mod:`~meshcurv.fit.circle_spec`,
+:mod:`~meshcurv.fit.euler_spec`). It exists to check the compiled kernel
+(:func:`meshcurv.fit.fused.curvature_cga`), which must agree with it to round-off.
 """
 
 import numpy as np
 
-from .cga import fit_normal_circle
-from .kernels import MIN_DIRECTION_SPREAD, PLANE_OFFSET, WEIGHT_POWER
-from .sinefit import fit_euler
+from .circle_spec import fit_normal_circle, sample_mix
+from .constants import MIN_DIRECTION_SPREAD, PLANE_OFFSET, WEIGHT_POWER
+from .euler_spec import fit_euler
+from .frame_spec import tangent_u
 
-__all__ = ["curvature_at_point", "local_jet"]
-
-
-def _tangent_u(q, n):
-    """First neighbour offset at least 30 degrees off the normal, made tangential and unit."""
-    for qj in q:
-        t = qj - (qj @ n) * n
-        if t @ t > 0.25 * (qj @ qj) and t @ t > 0:
-            return t / np.linalg.norm(t)
-    a = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    t = a - (a @ n) * n
-    return t / np.linalg.norm(t)
+__all__ = ["curvature_at_point"]
 
 
 def curvature_at_point(x, n, neighbours, radius, n_directions=8, slab=0.25, min_points=3,
@@ -52,7 +43,7 @@ def curvature_at_point(x, n, neighbours, radius, n_directions=8, slab=0.25, min_
     q = np.asarray(neighbours, dtype=np.float64) - x
     d2 = np.einsum("ij,ij->i", q, q)
     q = q[(d2 > 0) & (d2 <= radius * radius)]
-    tu = _tangent_u(q, n)
+    tu = tangent_u(q, n)
     tv = np.cross(n, tu)
     q = q / radius  # all fits in units of the radius
     u, v = q @ tu, q @ tv
@@ -77,14 +68,7 @@ def curvature_at_point(x, n, neighbours, radius, n_directions=8, slab=0.25, min_
             if not np.isfinite(kappa):
                 continue
             theta = alpha + side * np.pi
-            # the blend of directions this half-set measured (see kernels._sample_design)
-            rr = np.concatenate([[0.0], r2[half]])
-            wp = wt * rr * (rr - np.sum(wt * rr) / wt.sum())
-            if wp.sum() > 0:
-                mix = (np.sum(wp[1:] * np.cos(2 * phi[half])) / wp.sum(),
-                       np.sum(wp[1:] * np.sin(2 * phi[half])) / wp.sum())
-            else:
-                mix = (np.cos(2 * theta), np.sin(2 * theta))
+            mix = sample_mix(r2[half], phi[half], wt, theta)
             c, s = mix if section_blend else (np.cos(2 * theta), np.sin(2 * theta))
             row = [1.0, c, s] + ([np.cos(theta), np.sin(theta)] if half_frequency else [])
             kappas.append(kappa)
@@ -104,45 +88,3 @@ def curvature_at_point(x, n, neighbours, radius, n_directions=8, slab=0.25, min_
     out.update(k1=k1 / radius, k2=k2 / radius, d1=np.cos(theta1) * tu + np.sin(theta1) * tv,
                n_samples=int(used.sum()), residual=rms / radius)
     return out
-
-
-def local_jet(x, n, neighbours, radius):
-    """Cubic and quadric height fits around x (:func:`meshcurv.kernels.local_jet` in numpy).
-
-    Parameters
-    ----------
-    x, n : (3,) float, the point and its initial unit normal
-    neighbours : (k, 3) float; points beyond ``radius`` and x itself are ignored
-    radius : float, model units
-
-    Returns
-    -------
-    normal : (3,) float, unit normal of the fitted quadric at x, on n's side; n itself when a
-        fit is singular or the quadric would tilt it by more than 30 degrees
-    noise : float, RMS height residual of the cubic fit, model units, corrected for its 10
-        coefficients; NaN when the fit is singular
-    """
-    x = np.asarray(x, dtype=np.float64)
-    n = np.asarray(n, dtype=np.float64)
-    a = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    tu = np.cross(a, n)
-    tu /= np.linalg.norm(tu)
-    tv = np.cross(n, tu)
-    q = np.asarray(neighbours, dtype=np.float64) - x
-    d2 = np.einsum("ij,ij->i", q, q)
-    q = np.vstack([np.zeros(3), q[(d2 > 0) & (d2 <= radius * radius)] / radius])  # x included
-    u, v, h = q @ tu, q @ tv, q @ n
-    design = np.column_stack([u * u, u * v, v * v, u, v, np.ones_like(u),
-                              u ** 3, u * u * v, u * v * v, v ** 3])
-    w = 1 - np.einsum("ij,ij->i", q, q)
-    w[0] = 1.0
-    lhs = design.T @ (w[:, None] * design)
-    if len(q) <= 10 or np.linalg.matrix_rank(lhs) < 10:
-        return n, np.nan
-    coef = np.linalg.solve(lhs, design.T @ (w * h))
-    noise = np.sqrt(np.sum(w * (h - design @ coef) ** 2) / w.sum() * len(q) / (len(q) - 10))
-    coef = np.linalg.solve(lhs[:6, :6], design[:, :6].T @ (w * h))   # the quadric
-    if coef[3] ** 2 + coef[4] ** 2 > 1 / 3:
-        return n, noise * radius
-    g = n - coef[3] * tu - coef[4] * tv
-    return g / np.linalg.norm(g), noise * radius

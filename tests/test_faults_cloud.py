@@ -14,7 +14,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import meshcurv
-from meshcurv import api, normals, options
+from meshcurv import api, normals, options, pipeline
 from meshcurv.fit import fused_spec
 from meshcurv.neighbors import ball_grid, ball_neighbors, default_radius, spatial_order
 
@@ -197,14 +197,14 @@ def test_a_radius_far_too_large_is_computed_and_explained():
 
 
 def test_an_infeasible_radius_is_refused_in_one_line(monkeypatch):
-    monkeypatch.setattr(api, "MAX_PAIRS", 1e5)
+    monkeypatch.setattr(pipeline, "MAX_PAIRS", 1e5)
     with pytest.raises(ValueError, match="too large for these points") as exc:
         meshcurv.principal_curvatures(SPHERE.vertices, radius=10.0)
     assert "\n" not in str(exc.value) and "smaller radius" in str(exc.value)
 
 
 def test_large_balls_are_computed_in_smaller_blocks(monkeypatch, alone):
-    monkeypatch.setattr(api, "_BLOCK_ENTRIES", 2000)         # ~30 queries per block
+    monkeypatch.setattr(pipeline, "BLOCK_ENTRIES", 2000)         # ~30 queries per block
     res = meshcurv.principal_curvatures(SPHERE.vertices, radius=RADIUS)
     assert np.array_equal(res.k1, alone["given"].k1)
 

@@ -41,7 +41,7 @@ def test_circle_fit_matches_its_specification(normalization, beta):
         expected, _ = circle_spec.fit_normal_circle(pts, np.array([0.0, 0.0, 1.0]), weights,
                                                      normalization)
         assert kappa == pytest.approx(expected, rel=1e-9, abs=1e-9)
-        assert 0.5 < kappa < 1.0            # bends away from n: positive (a paraboloid, not a circle)
+        assert 0.5 < kappa < 1.0     # bends away from n: positive (a paraboloid, not a circle)
 
 
 def test_direction_mix_matches_its_specification():

@@ -24,8 +24,8 @@ N_ACC = 12
 def sample_design(acc, k, corrected, cos2t, sin2t):
     """Regressors (cos 2theta, sin 2theta) of one circle-fit sample for the Euler model.
 
-    Nominally (cos 2theta, sin 2theta) of the sample's plane direction theta. With ``corrected`` they are the cos/sin 2phi
-    of the half-set's own points, averaged with the weights the circle fit gives them: to first
+    Nominally (cos 2theta, sin 2theta) of the sample's plane direction theta. With
+    ``corrected`` they are the cos/sin 2phi of the half-set's own points, averaged with the weights the circle fit gives them: to first
     order in the heights, the fitted curvature is sum_p w_p k(phi_p) / sum_p w_p with
     w_p = r2_p (r2_p - mean r2), so a slab of finite width samples a known blend of directions
     rather than theta alone, and the Euler model can be fitted to that blend exactly.

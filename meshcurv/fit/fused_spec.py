@@ -29,7 +29,7 @@ def curvature_at_point(x, n, neighbours, radius, n_directions=8, slab=0.25, min_
         the tangent frame, as the lowest-index one does in the kernel
     radius : float, model units; ``slab`` and ``min_spread`` are fractions of it
     blend : float in [0, 1], weights ``(1 - blend) + blend (1 - r^2 / radius^2)^WEIGHT_POWER``
-        (see :func:`meshcurv.api.weight_blend`)
+        (see :func:`meshcurv.pipeline.weight_blend`)
     other parameters : as in :func:`meshcurv.principal_curvatures`
 
     Returns

@@ -10,6 +10,7 @@ from .autoradius import auto_radius
 from .inputs import as_arrays
 from .neighbors import default_radius, power_of_two_scale
 from .options import resolve_plan
+from .result import Status
 
 __all__ = ["principal_curvatures", "estimate_normals", "no_estimate_reason"]
 
@@ -143,6 +144,7 @@ def _run_rescaled(v, f, given_normals, radius, query, plan, progress, scale):
     for name in ("k1", "k2", "d1", "d2", "residual"):
         getattr(res, name)[lost] = np.nan
     res.valid &= ~lost
+    res.status[lost] = Status.OUT_OF_RANGE
     res.radius = radius
     return res
 

@@ -222,12 +222,14 @@ class _Outputs:
         self.d1, self.d2, self.normals = (np.full((m, 3), np.nan) for _ in range(3))
         self.n_samples = np.zeros(m, dtype=np.int32)
         self.n_neighbors = np.zeros(m, dtype=np.int32)
+        self.status = np.zeros(m, dtype=np.int8)
 
     def result(self, radius):
         return CurvatureResult(k1=self.k1, k2=self.k2, d1=self.d1, d2=self.d2,
                                normals=self.normals, valid=np.isfinite(self.k1),
                                n_neighbors=self.n_neighbors, n_samples=self.n_samples,
-                               residual=self.residual, noise=self.noise, radius=radius)
+                               residual=self.residual, noise=self.noise, radius=radius,
+                               status=self.status)
 
 
 def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan):
@@ -241,12 +243,14 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan):
         qb = _mix_normals(start, qb, beta)
     k1, k2, residual, samples, nbrs = (np.empty(b) for _ in range(5))
     d1, d2 = np.empty((b, 3)), np.empty((b, 3))
+    status = np.empty(b, dtype=np.int8)
     blend = beta if plan.weighting == "auto" else weight_blend(noise, radius, plan.weighting)
     fused.curvature_cga(search.points, xb, qb, indptr, indices, radius, *plan.fit[:4], blend,
-                        *plan.fit[4:], k1, k2, d1, d2, samples, residual, nbrs, search.rank)
+                        *plan.fit[4:], k1, k2, d1, d2, samples, residual, nbrs, status,
+                        search.rank)
     out.k1[pos], out.k2[pos], out.d1[pos], out.d2[pos] = k1, k2, d1, d2
     out.normals[pos], out.n_samples[pos], out.residual[pos] = qb, samples, residual
-    out.n_neighbors[pos], out.noise[pos] = nbrs, noise
+    out.n_neighbors[pos], out.noise[pos], out.status[pos] = nbrs, noise, status
 
 
 def run(v, f, given_normals, radius, query, plan, progress=False):

@@ -32,7 +32,8 @@ def test_kernel_matches_numpy_reference(options):
     indptr, indices = sorted_ball_csr(v, radius)
     m = len(v)
     out = dict(k1=np.empty(m), k2=np.empty(m), d1=np.empty((m, 3)), d2=np.empty((m, 3)),
-               n_samples=np.empty(m), residual=np.empty(m), n_neighbors=np.empty(m))
+               n_samples=np.empty(m), residual=np.empty(m), n_neighbors=np.empty(m),
+               status=np.empty(m, dtype=np.int8))
     opt = dict(n_directions=8, slab=0.25, blend=1.0, circle_normalization="tangent",
                section_blend=True, half_frequency=False, robust=True) | options
     fused.curvature_cga(v, v, s.normals, indptr, indices, radius, opt["n_directions"],

@@ -18,3 +18,14 @@ PLANE_OFFSET = 0.25
 # triangle fan) 0 .. 0.0018: there the Euler model's B and C are not determined, and k1, k2
 # would be noise (often exactly 0) marked valid.
 MIN_DIRECTION_SPREAD = 3e-3
+
+# Why a vertex has no estimate: the kernel's codes of :class:`meshcurv.result.Status` (int8),
+# one per early return (documented there).
+STATUS_OK = 0
+STATUS_NO_POSITION = 1
+STATUS_NO_NORMAL = 2
+STATUS_TOO_FEW_NEIGHBORS = 3
+STATUS_TOO_FEW_HALF_SETS = 4
+STATUS_ILL_POSED_FIT = 5
+STATUS_DEGENERATE_DIRECTIONS = 6
+STATUS_OUT_OF_RANGE = 7

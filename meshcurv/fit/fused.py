@@ -14,7 +14,9 @@ from numba import njit, prange
 
 from ..linalg import CHUNK
 from .circle import N_ACC, accumulate_half_sets, half_set_samples
-from .constants import MIN_DIRECTION_SPREAD, PLANE_OFFSET
+from .constants import (MIN_DIRECTION_SPREAD, PLANE_OFFSET, STATUS_DEGENERATE_DIRECTIONS,
+                        STATUS_ILL_POSED_FIT, STATUS_NO_NORMAL, STATUS_NO_POSITION, STATUS_OK,
+                        STATUS_TOO_FEW_HALF_SETS, STATUS_TOO_FEW_NEIGHBORS)
 from .euler import direction_spread, euler_residual, robust_euler_fit
 from .frame import tangent_frame
 
@@ -40,10 +42,11 @@ def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, wo
 
     Returns
     -------
-    ``(k1, k2, theta1, n_samples, residual, n_neighbors)``: curvatures (1 / model units; NaN
-    where no estimate), the angle of d1 from tu, the circle fits used, the Euler fit's RMS
-    (1 / model units) and the neighbors in the ball. An estimate needs 3 planes and 5 circle
-    fits, a well-posed Euler fit and measured directions spread by ``MIN_DIRECTION_SPREAD``.
+    ``(k1, k2, theta1, n_samples, residual, n_neighbors, status)``: curvatures (1 / model
+    units; NaN where no estimate), the angle of d1 from tu, the circle fits used, the Euler
+    fit's RMS (1 / model units), the neighbors in the ball and the reason code
+    (:class:`meshcurv.result.Status`). An estimate needs 3 planes and 5 circle fits, a
+    well-posed Euler fit and measured directions spread by ``MIN_DIRECTION_SPREAD``.
     """
     ndir, slab, min_points, min_spread, unit_norm, corrected, half_frequency, robust = opts
     ca, sa, dirs = planes
@@ -56,16 +59,17 @@ def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, wo
     m, planes_seen = half_set_samples(acc, ndir, min_points, min_spread, unit_norm, corrected,
                                       dirs, kappa, rows, mix, active, b3, ev)
     if planes_seen < 3 or m < 5:
-        return np.nan, np.nan, np.nan, m, np.nan, n_nbr
+        why = STATUS_TOO_FEW_NEIGHBORS if n_nbr < min_points else STATUS_TOO_FEW_HALF_SETS
+        return np.nan, np.nan, np.nan, m, np.nan, n_nbr, why
     npar = 5 if half_frequency else 3
     if not robust_euler_fit(rows, kappa, active, m, npar, robust, mat, rhs, sol, scratch):
-        return np.nan, np.nan, np.nan, m, np.nan, n_nbr
+        return np.nan, np.nan, np.nan, m, np.nan, n_nbr, STATUS_ILL_POSED_FIT
     used, sse = euler_residual(rows, kappa, active, m, npar, sol)
     if direction_spread(mix, active, m) < MIN_DIRECTION_SPREAD:
-        return np.nan, np.nan, np.nan, m, np.nan, n_nbr
+        return np.nan, np.nan, np.nan, m, np.nan, n_nbr, STATUS_DEGENERATE_DIRECTIONS
     amp = math.sqrt(sol[1] * sol[1] + sol[2] * sol[2])
     return ((sol[0] + amp) * inv_r, (sol[0] - amp) * inv_r, 0.5 * math.atan2(sol[2], sol[1]),
-            used, math.sqrt(sse / used) * inv_r, n_nbr)
+            used, math.sqrt(sse / used) * inv_r, n_nbr, STATUS_OK)
 
 
 @njit(cache=True)
@@ -107,7 +111,8 @@ def _write_directions(q, theta1, tu, tv, n, d1, d2):
 @njit(parallel=True, cache=True)
 def curvature_cga(points, query_points, query_normals, indptr, indices, radius, ndir, slab,
                   min_points, min_spread, blend, unit_norm, corrected, half_frequency,
-                  robust, k1, k2, d1, d2, n_samples, residual, n_neighbors, rank=None):
+                  robust, k1, k2, d1, d2, n_samples, residual, n_neighbors, status,
+                  rank=None):
     """Fused CGA circle-fit estimator over query points with CSR neighbor lists.
 
     Parameters
@@ -124,7 +129,8 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
     corrected, half_frequency, robust : bool, ``section_blend``, ``half_frequency`` and
         ``robust`` of :func:`meshcurv.principal_curvatures`
     Outputs k1, k2 (m,), d1, d2 (m, 3), n_samples, residual, n_neighbors (m,) are written in
-    place; NaN where no estimate is possible.
+    place; NaN where no estimate is possible; status (m,) int8 says why
+    (:class:`meshcurv.result.Status`).
     rank : (n,) int64, optional, the input index of each row of ``points`` when they are stored
         in another order (e.g. a grid's sorted copy, for memory locality): the tangent frame's
         lowest-index rule then picks the same neighbor as on the input.
@@ -147,13 +153,19 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
                 x[a] = query_points[q, a]
                 n[a] = query_normals[q, a]
             e1, e2, theta1, used, rms, n_nbr = np.nan, np.nan, np.nan, 0, np.nan, 0
+            why = STATUS_NO_POSITION
             nn = math.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
+            if np.isfinite(x[0] + x[1] + x[2]):
+                why = STATUS_NO_NORMAL
             if nn > 0.0 and np.isfinite(nn) and np.isfinite(x[0] + x[1] + x[2]):
                 for a in range(3):
                     n[a] /= nn
-                e1, e2, theta1, used, rms, n_nbr = estimate_one(
+                e1, e2, theta1, used, rms, n_nbr, why = estimate_one(
                     points, indices, indptr[q], indptr[q + 1], x, n, rank, radius, blend[q],
                     opts, planes, work, tu, tv)
+            if why == STATUS_OK and not np.isfinite(e1):
+                why = STATUS_ILL_POSED_FIT
+            status[q] = why
             n_samples[q] = used
             residual[q] = rms
             n_neighbors[q] = n_nbr

@@ -72,25 +72,24 @@ def kring_neighbors(points, adjacency, radius, query, work=None):
     -------
     indptr : (m + 1,) int64; indices : (nnz,) int64 (query vertex excluded, breadth-first order)
     """
-    points = np.ascontiguousarray(points, dtype=np.float64)
-    query = np.ascontiguousarray(query, dtype=np.int64)
-    if work is None:
-        work = KringWork(len(points))
-    tag0 = work.take_tags(len(query))
-    return kring_ball_csr(adjacency[0], adjacency[1], points, query, float(radius),
-                                       work.stamp, work.queue, tag0)
+    return _run_kring(kring_ball_csr, points, adjacency, radius, query, work)
 
 
 def kring_counts(points, adjacency, radius, query, work=None):
     """(m,) int64 size of each query vertex's neighbourhood in :func:`kring_neighbors`,
     without storing the lists (to size the work first)."""
+    return _run_kring(kring_ball_counts, points, adjacency, radius, query, work)
+
+
+def _run_kring(kernel, points, adjacency, radius, query, work):
+    """Call a k-ring kernel with converted inputs and fresh stamps of ``work`` (made if None)."""
     points = np.ascontiguousarray(points, dtype=np.float64)
     query = np.ascontiguousarray(query, dtype=np.int64)
     if work is None:
         work = KringWork(len(points))
     tag0 = work.take_tags(len(query))
-    return kring_ball_counts(adjacency[0], adjacency[1], points, query, float(radius),
-                                work.stamp, work.queue, tag0)
+    return kernel(adjacency[0], adjacency[1], points, query, float(radius), work.stamp,
+                  work.queue, tag0)
 
 
 @njit(cache=True)

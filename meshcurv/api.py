@@ -44,7 +44,7 @@ def estimate_normals(points, radius, progress=False):
 
     Parameters
     ----------
-    points : (n, 3) float, model units (NaN rows get NaN normals and are nobody's neighbour)
+    points : (n, 3) float, model units (NaN rows get NaN normals and are nobody's neighbor)
     radius : float, model units
     progress : bool, show a progress bar
 
@@ -91,7 +91,7 @@ def no_estimate_reason(result, n_points, option="radius"):
 
     ``n_points`` is the number of finite input points; ``option`` names the radius as the
     caller's user knows it (e.g. "--radius"). Balls holding nearly every point mean a radius
-    far too large (fits see a whole object, no surface patch); balls with few neighbours one
+    far too large (fits see a whole object, no surface patch); balls with few neighbors one
     too small.
     """
     nn = np.asarray(result.n_neighbors)
@@ -101,8 +101,8 @@ def no_estimate_reason(result, n_points, option="radius"):
                 f"point (median {med:.0f} of {n_points}); try a much smaller {option}")
     if med < 12:
         return (f"the radius {result.radius:.6g} is too small: its balls hold a median of "
-                f"{med:.0f} neighbours; try a larger {option}")
-    return (f"no neighbourhood of radius {result.radius:.6g} (median {med:.0f} neighbours) spans "
+                f"{med:.0f} neighbors; try a larger {option}")
+    return (f"no neighborhood of radius {result.radius:.6g} (median {med:.0f} neighbors) spans "
             f"a surface patch in enough directions (points along lines or curves, one-sided "
             f"or coincident); try another {option}")
 
@@ -158,7 +158,7 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
                          query=None, progress=False):
     """Principal curvatures by CGA circle fits in normal sections (Seibert et al.).
 
-    At every vertex x: the neighbours within ``radius`` are split by ``n_directions`` planes
+    At every vertex x: the neighbors within ``radius`` are split by ``n_directions`` planes
     through the normal into ``2 * n_directions`` half-sets; a circle centred on the normal line
     is fitted to each (a 3x3 eigenproblem in conformal geometric algebra); the Euler model
     ``kappa(theta) = A + B cos 2theta + C sin 2theta`` fitted to those curvatures gives k1, k2
@@ -169,13 +169,13 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
     vertices : (n, 3) float or trimesh.Trimesh
         Points, model units. Never reordered; NaN/inf rows give NaN results.
     faces : (m, 3) int, optional
-        Triangles, counter-clockwise seen from outside. Enables the k-ring neighbourhood and
+        Triangles, counter-clockwise seen from outside. Enables the k-ring neighborhood and
         face-based normal orientation.
     normals : (n, 3) float, optional
         Outward normals, used as given (normalised). Default: estimated, see
         ``normal_estimation``.
     radius : float or "auto", optional
-        Neighbourhood radius, model units. Default: the radius whose ball holds about 100
+        Neighborhood radius, model units. Default: the radius whose ball holds about 100
         points (:func:`meshcurv.neighbors.default_radius`; ~5 mean edge lengths).
         "auto": one radius per mesh that balances the noise measured on the data against the
         circle model's bias (:func:`meshcurv.autoradius.auto_radius`; a few pilot runs on a
@@ -191,7 +191,7 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
         points (less noise) at the price of a blend of directions, which ``section_blend``
         models.
     min_points : int, default 3
-        Fewest neighbours (besides x) a half-set needs to be fitted.
+        Fewest neighbors (besides x) a half-set needs to be fitted.
     min_spread : float, default 0.25
         Fewest fraction of ``radius`` the farthest point of a half-set must reach along its
         direction; rejects one-sided stubs near borders and holes.
@@ -218,13 +218,13 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
         absorb differences between opposite directions.
     normal_estimation : {"auto", "faces", "pca"}
         Used when ``normals`` is None. "faces": area-weighted face normals. "pca": normal of
-        the least-squares plane through the same neighbourhood, oriented by the faces if there
+        the least-squares plane through the same neighborhood, oriented by the faces if there
         are any, else by ``orientation``. "auto" (default): "pca" - on noisy meshes face normals
         are the worst choice (0.3 % noise, random sphere: mean |dk1| + |dk2| 0.60 with face
         normals, 0.38 with PCA ones; max |dk1| 13 vs 0.9), on clean ones the refinement below
         makes the two equal.
     refine_normals : bool or None, default None
-        Refine the normals by a local quadric fit over the same neighbourhood before the
+        Refine the normals by a local quadric fit over the same neighborhood before the
         circle fits (:func:`meshcurv.fit.jet.local_jet`), mixed with the starting normal by
         the measured noise (the mix of ``weighting="auto"``,
         :func:`meshcurv.pipeline.weight_blend`, whatever ``weighting`` is): face and PCA normals
@@ -236,7 +236,7 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
         spanning tree and then turns each connected piece away from its own centroid; a (3,)
         point orients every normal towards it (a scanner position).
     query : (q,) int, optional
-        Estimate only at these vertex indices (neighbours still come from all vertices); the
+        Estimate only at these vertex indices (neighbors still come from all vertices); the
         result then has q rows in this order.
     progress : bool, default False
         Show a progress bar.

@@ -1,4 +1,4 @@
-"""Automatic neighbourhood radius from the sampling density, a noise estimate and a bias probe.
+"""Automatic neighborhood radius from the sampling density, a noise estimate and a bias probe.
 
 The mean curvature error of the estimator at radius R is modelled as noise plus bias,
 
@@ -58,7 +58,7 @@ def _sample(n, size, seed):
 def estimate_sampling(vertices, k=24, sample=2000, seed=0):
     """Sampling density and normal noise of a point set, from local quadric fits.
 
-    At each of up to ``sample`` vertices the ``k`` nearest neighbours (itself included) are put
+    At each of up to ``sample`` vertices the ``k`` nearest neighbors (itself included) are put
     in their PCA frame and a quadric ``h = a + b u + c v + d u^2 + e uv + f v^2`` is fitted; the
     RMS residual, corrected for the 6 fitted parameters, estimates the noise along the normal
     (a quadric absorbs the curvature, so a clean smooth surface gives ~0).
@@ -66,7 +66,7 @@ def estimate_sampling(vertices, k=24, sample=2000, seed=0):
     Parameters
     ----------
     vertices : (n, 3) float, model units (NaN rows ignored)
-    k : int, neighbours per fit (>= 10)
+    k : int, neighbors per fit (>= 10)
     sample : int, vertices used (chosen at random with ``seed``)
 
     Returns
@@ -103,7 +103,7 @@ def estimate_sampling(vertices, k=24, sample=2000, seed=0):
         density = float(np.median(k / (np.pi * np.maximum(dist[:, -1], 1e-300) ** 2)))
     with np.errstate(over="ignore", invalid="ignore"):
         q = v[nb] - v[nb].mean(axis=1, keepdims=True)                # (s, k, 3)
-    # neighbourhoods too large for the quadric's moments in float64 (a far point's): left out
+    # neighborhoods too large for the quadric's moments in float64 (a far point's): left out
     sane = np.all(np.abs(q) < 1e60, axis=(1, 2))   # design moments: 4th powers
     idx, q = idx[~far][sane], q[sane]
     if len(q) == 0:
@@ -156,7 +156,7 @@ def _balanced_radius(gain, sigma, density, beta, r_min, r_max):
 def auto_radius(vertices, faces=None, normals=None, *, weighting="none", min_points=40,
                 max_angle=0.7, max_fraction=0.25, tolerance=0.05, probe_ratio=1.6, sample=2000,
                 seed=0, details=False, **settings):
-    """Neighbourhood radius for :func:`meshcurv.principal_curvatures` that balances noise and
+    """Neighborhood radius for :func:`meshcurv.principal_curvatures` that balances noise and
     bias (module docstring), chosen per mesh.
 
     Parameters

@@ -126,7 +126,7 @@ def solve_sym(m, rhs, npar, sol):
 def ball_offset(points, k, x0, x1, x2, r2max, inv_r):
     """Offset of ``points[k]`` from (x0, x1, x2) in units of the radius, and its squared length:
     ``(inside, qx, qy, qz, r2)``. ``inside`` is False for a coincident point (the query point
-    itself) and beyond the radius: the neighbourhood every fit here works on."""
+    itself) and beyond the radius: the neighborhood every fit here works on."""
     qx = points[k, 0] - x0
     qy = points[k, 1] - x1
     qz = points[k, 2] - x2

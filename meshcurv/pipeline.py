@@ -112,8 +112,8 @@ def block_size(search, queries, radius, what):
     per = max(float(np.mean(counts)) if len(counts) else 0.0, 1.0)
     if per * len(queries) > MAX_PAIRS:
         raise ValueError(
-            f"radius {radius:.6g} is too large for these {what}: each neighbourhood would hold "
-            f"about {per:.3g} points ({per * len(queries):.3g} neighbour pairs in all, far too "
+            f"radius {radius:.6g} is too large for these {what}: each neighborhood would hold "
+            f"about {per:.3g} points ({per * len(queries):.3g} neighbor pairs in all, far too "
             f"many to compute); use a smaller radius")
     return int(min(BLOCK, max(1, BLOCK_ENTRIES // per)))
 

@@ -14,7 +14,7 @@ PLANE_OFFSET = 0.25
 # eigenvalue of the covariance of their (cos 2phi, sin 2phi) mixes (see ``_sample_design``)
 # over the samples kept. Measured: directions all around ~0.34 (sphere), mesh borders and
 # corners >= 0.15, the border of a random half-sphere cloud >= 0.027, the corners of a random
-# square patch 0.0069 .. 0.0095 (still accurate); neighbours along one curve (the rim of a
+# square patch 0.0069 .. 0.0095 (still accurate); neighbors along one curve (the rim of a
 # triangle fan) 0 .. 0.0018: there the Euler model's B and C are not determined, and k1, k2
 # would be noise (often exactly 0) marked valid.
 MIN_DIRECTION_SPREAD = 3e-3

@@ -11,11 +11,11 @@ from numba import njit
 def tangent_frame(points, nbr, lo, hi, x, n, r2max, tu, tv, rank):
     """Tangent frame (tu, tv, n) that rotates with the data.
 
-    tu is the tangential part of the offset to the neighbour of lowest index lying at least
-    30 degrees off the normal. The choice depends on neither the order of the neighbour list
+    tu is the tangential part of the offset to the neighbor of lowest index lying at least
+    30 degrees off the normal. The choice depends on neither the order of the neighbor list
     nor the coordinates' position, scale or orientation, so the frame - and with it the
     sampling planes - is equivariant under rotation, translation and scaling. Falls back to a
-    fixed frame if there is no such neighbour. ``rank`` (or None: the row itself) is the index
+    fixed frame if there is no such neighbor. ``rank`` (or None: the row itself) is the index
     of each row of ``points``, for points stored in another order than the input's.
     """
     found = False

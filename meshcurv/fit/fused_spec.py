@@ -16,15 +16,15 @@ from .frame_spec import tangent_u
 __all__ = ["curvature_at_point"]
 
 
-def curvature_at_point(x, n, neighbours, radius, n_directions=8, slab=0.25, min_points=3,
+def curvature_at_point(x, n, neighbors, radius, n_directions=8, slab=0.25, min_points=3,
                        min_spread=0.25, blend=1.0, circle_normalization="tangent",
                        section_blend=True, half_frequency=False, robust=True):
-    """Principal curvatures at one point from its neighbours (the kernel's contract, in numpy).
+    """Principal curvatures at one point from its neighbors (the kernel's contract, in numpy).
 
     Parameters
     ----------
     x : (3,) float, the point; n : (3,) float, its unit normal (outward)
-    neighbours : (k, 3) float, candidate neighbours sorted by vertex index (x itself and points
+    neighbors : (k, 3) float, candidate neighbors sorted by vertex index (x itself and points
         beyond ``radius`` are ignored); the first one at least 30 degrees off the normal sets
         the tangent frame, as the lowest-index one does in the kernel
     radius : float, model units; ``slab`` and ``min_spread`` are fractions of it
@@ -40,7 +40,7 @@ def curvature_at_point(x, n, neighbours, radius, n_directions=8, slab=0.25, min_
     x = np.asarray(x, dtype=np.float64)
     n = np.asarray(n, dtype=np.float64)
     n = n / np.linalg.norm(n)
-    q = np.asarray(neighbours, dtype=np.float64) - x
+    q = np.asarray(neighbors, dtype=np.float64) - x
     d2 = np.einsum("ij,ij->i", q, q)
     q = q[(d2 > 0) & (d2 <= radius * radius)]
     tu = tangent_u(q, n)

@@ -34,21 +34,21 @@ def _add_monomials(moments, c, u, v, degree):
 def local_jet(points, query_points, normals, indptr, indices, radius, refine, noise):
     """Local height fits around each query point: noise level (cubic) and normal (quadric).
 
-    In a frame (tu, tv, n) around each query point x, the heights of its neighbours within
+    In a frame (tu, tv, n) around each query point x, the heights of its neighbors within
     ``radius`` are fitted by polynomials in (u, v) (least squares with weights
     ``1 - r^2 / radius^2``, x included). The cubic fit's residual (10 coefficients) is what the
     surface's shape up to third order cannot explain: on clean samples of smooth surfaces it
     is below 0.1 % of the radius, with noise it is the noise. With ``refine`` the normal of the
     fitted quadric (6 coefficients; the cubic's gradient at x has 3-5x its variance under
     noise) at x, ``n - g_u tu - g_v tv`` normalised, replaces n: face and PCA normals tilt with
-    irregular sampling (0.7 degrees on a randomly sampled sphere at ~100 neighbours), the
+    irregular sampling (0.7 degrees on a randomly sampled sphere at ~100 neighbors), the
     quadric's normal does not. The refined normal stays on n's side.
 
     Parameters
     ----------
     points : (n, 3) float64; query_points : (m, 3) float64
     normals : (m, 3) float64, unit; refined in place when ``refine``
-    indptr, indices : CSR neighbour lists into ``points``; radius : float, model units
+    indptr, indices : CSR neighbor lists into ``points``; radius : float, model units
     refine : bool
     noise : (m,) float64 output, RMS height residual of the cubic fit (model units, corrected
         for the 10 fitted coefficients); NaN where the fit is singular (fewer than 11

@@ -6,13 +6,13 @@ import numpy as np
 __all__ = ["local_jet"]
 
 
-def local_jet(x, n, neighbours, radius):
+def local_jet(x, n, neighbors, radius):
     """Cubic and quadric height fits around x (:func:`meshcurv.fit.jet.local_jet` in numpy).
 
     Parameters
     ----------
     x, n : (3,) float, the point and its initial unit normal
-    neighbours : (k, 3) float; points beyond ``radius`` and x itself are ignored
+    neighbors : (k, 3) float; points beyond ``radius`` and x itself are ignored
     radius : float, model units
 
     Returns
@@ -28,7 +28,7 @@ def local_jet(x, n, neighbours, radius):
     tu = np.cross(a, n)
     tu /= np.linalg.norm(tu)
     tv = np.cross(n, tu)
-    q = np.asarray(neighbours, dtype=np.float64) - x
+    q = np.asarray(neighbors, dtype=np.float64) - x
     d2 = np.einsum("ij,ij->i", q, q)
     q = np.vstack([np.zeros(3), q[(d2 > 0) & (d2 <= radius * radius)] / radius])  # x included
     u, v, h = q @ tu, q @ tv, q @ n

@@ -98,7 +98,7 @@ def ball_neighbors(tree, finite_index, query_points, radius, ascending=True, pos
     tree : BallGrid from :func:`ball_grid` (fast; ``finite_index`` is then unused and the grid's
         own radius must equal ``radius``), or a scipy.spatial.cKDTree over the finite points
     finite_index : (k,) int64, the vertex index of each point in the tree
-    query_points : (m, 3) float64 (rows with NaN get no neighbours)
+    query_points : (m, 3) float64 (rows with NaN get no neighbors)
     radius : float, model units
     ascending : bool, default True
         Sort each list. False leaves a grid's lists in grid order (about twice as fast;
@@ -106,7 +106,7 @@ def ball_neighbors(tree, finite_index, query_points, radius, ascending=True, pos
     positions : bool, default False
         With a grid: return rows of ``tree.sorted_points`` (the points in grid order,
         ``tree.order`` their vertex indices) instead of vertex indices. Kernels that read the
-        neighbours' coordinates from ``tree.sorted_points`` then find them close together in
+        neighbors' coordinates from ``tree.sorted_points`` then find them close together in
         memory, which on a large cloud in random order is several times faster. Ignored (vertex
         indices) with a cKDTree.
 
@@ -152,12 +152,12 @@ def ball_counts(tree, query_points, radius):
 
 
 def spatial_order(points, cell):
-    """Order that visits the points grid cell by grid cell, so that neighbours are near in it.
+    """Order that visits the points grid cell by grid cell, so that neighbors are near in it.
 
     Lattice cells of edge ``cell`` (enlarged where a filled extent would need more than
     ``4 n + 2**20`` cells; hashed where even that does not fit, e.g. with far outliers),
     numbered x-major and z fastest; points with NaN coordinates come last. Processing queries
-    in this order keeps the points their neighbourhoods touch in cache. Memory is bounded by
+    in this order keeps the points their neighborhoods touch in cache. Memory is bounded by
     the number of points whatever the coordinates.
 
     Parameters
@@ -484,7 +484,7 @@ def _cell_ball_one(order, sorted_points, cell_start, grid_base, cell, dims, tabl
 
 @njit(cache=True)
 def _shell_sort(a, lo, hi):
-    """Sort ``a[lo:hi]`` in place; for the ~100 entries of a neighbour list about twice as fast
+    """Sort ``a[lo:hi]`` in place; for the ~100 entries of a neighbor list about twice as fast
     as ``ndarray.sort`` (which sets up a quicksort stack per call)."""
     for gap in (57, 23, 10, 4, 1):
         for j in range(lo + gap, hi):
@@ -523,7 +523,7 @@ def cell_ball_csr(order, sorted_points, cell_start, grid_base, cell, dims, table
 
     Each list is ascending with ``ascending``, else in grid order (cheaper; for consumers that
     do not depend on the order). With ``positions`` the lists hold rows of ``sorted_points``
-    (whose neighbourhoods then lie close together in memory) instead of point indices.
+    (whose neighborhoods then lie close together in memory) instead of point indices.
 
     The grid comes from :func:`dense_grid_build` (``table_keys`` empty; ``grid_base`` and
     ``dims`` its block of cells) or :func:`hashed_grid_build` (``grid_base``, ``dims`` unused),

@@ -21,7 +21,7 @@ def edge_adjacency(faces, n_vertices):
     n_vertices : int
 
     Degenerate faces contribute only their distinct edges; non-manifold edges are fine.
-    Each row is sorted and holds every neighbour once. ``indptr`` (n + 1,) int64, ``indices``
+    Each row is sorted and holds every neighbor once. ``indptr`` (n + 1,) int64, ``indices``
     int32.
     """
     faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
@@ -64,7 +64,7 @@ def kring_neighbors(points, adjacency, radius, query, work=None):
     points : (n, 3) float64
     adjacency : CSR ``(indptr, indices)`` from :func:`edge_adjacency`
     radius : float, model units
-    query : (m,) int64, vertices to collect neighbourhoods for
+    query : (m,) int64, vertices to collect neighborhoods for
     work : KringWork, optional
         Work arrays to reuse across calls on the same mesh (saves an O(n) allocation per call).
 
@@ -76,7 +76,7 @@ def kring_neighbors(points, adjacency, radius, query, work=None):
 
 
 def kring_counts(points, adjacency, radius, query, work=None):
-    """(m,) int64 size of each query vertex's neighbourhood in :func:`kring_neighbors`,
+    """(m,) int64 size of each query vertex's neighborhood in :func:`kring_neighbors`,
     without storing the lists (to size the work first)."""
     return _run_kring(kring_ball_counts, points, adjacency, radius, query, work)
 
@@ -150,9 +150,9 @@ def edge_adjacency_csr(faces, n):
 @njit(cache=True)
 def _kring_one(adj_ptr, adj_idx, points, s, tag, r2max, stamp, queue, out, base, limit):
     """Breadth-first, radius-limited k-ring of vertex ``s``; the connected, radius-limited
-    neighbourhood that cannot jump across a thin sheet.
+    neighborhood that cannot jump across a thin sheet.
 
-    Writes the neighbours found to ``out[base:]`` as long as they fit below ``limit`` and returns
+    Writes the neighbors found to ``out[base:]`` as long as they fit below ``limit`` and returns
     how many there are (so a caller can detect an overflow). ``stamp`` marks visited vertices
     with ``tag``, a value unique to this search.
     """

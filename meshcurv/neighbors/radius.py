@@ -38,7 +38,7 @@ def typical_extent(points, sample=20000, seed=0):
 def default_radius(points, target_neighbors=100, sample=20000, seed=0):
     """Radius (model units) whose ball holds about ``target_neighbors`` points of the sampling.
 
-    The local area density is estimated from the distance d16 to the 16th nearest neighbour,
+    The local area density is estimated from the distance d16 to the 16th nearest neighbor,
     ``rho = 16 / (pi d16^2)``, on up to ``sample`` points; the radius is
     ``sqrt(target / (pi rho))`` with the median of d16^2. For a regular grid of spacing h this
     is about 5.6 h; for a mesh about 5 mean edge lengths. A few far-away points do not move it
@@ -64,7 +64,7 @@ def default_radius(points, target_neighbors=100, sample=20000, seed=0):
         return default_radius(scaled, target_neighbors, sample, seed) / s
     radius = _default_radius(p, target_neighbors, sample, seed)
     if not np.isfinite(radius):
-        # most points duplicated (coincident points are nobody's neighbour): distinct ones
+        # most points duplicated (coincident points are nobody's neighbor): distinct ones
         p = np.unique(p, axis=0)
         radius = _default_radius(p, target_neighbors, sample, seed) if len(p) > 1 else radius
     return radius

@@ -35,7 +35,7 @@ def orient_towards(normals, points, viewpoint):
 def orient_mst(points, normals, k=10, neighbors=None):
     """Consistent orientation by propagation over a minimum spanning tree, then outward.
 
-    The k-nearest-neighbour graph is weighted by ``1 - |n_i . n_j|`` (Hoppe et al. 1992), so the
+    The k-nearest-neighbor graph is weighted by ``1 - |n_i . n_j|`` (Hoppe et al. 1992), so the
     tree propagates signs along smooth paths first (weights rounded to 4096 steps of
     ``sqrt(w)``, see :func:`meshcurv.orient_spanning_tree`). Each connected piece is
     then flipped as a whole so that its normals point away from its centroid on average -
@@ -44,11 +44,11 @@ def orient_mst(points, normals, k=10, neighbors=None):
     Parameters
     ----------
     points : (n, 3) float64; normals : (n, 3) float64 unit, NaN rows are left alone
-    k : int, neighbours per point in the graph (when ``neighbors`` is not given)
+    k : int, neighbors per point in the graph (when ``neighbors`` is not given)
     neighbors : (n, j) int, optional
         The graph, e.g. from :func:`nearest_in_lists` over lists already at
         hand: row i lists point indices joined to i, -1 for none. Default: the k nearest
-        neighbours from a k-d tree.
+        neighbors from a k-d tree.
 
     Returns
     -------
@@ -89,7 +89,7 @@ def orient_mst(points, normals, k=10, neighbors=None):
         order = grid.spatial_order(p, cell)
     rank = np.empty(len(p) + 1, dtype=np.int32)
     rank[order] = np.arange(len(p), dtype=np.int32)
-    rank[-1] = -1                          # "no neighbour" stays -1 (index -1 wraps to it)
+    rank[-1] = -1                          # "no neighbor" stays -1 (index -1 wraps to it)
     graph = np.ascontiguousarray(nb[order], dtype=np.int32)
     np.take(rank, graph, out=graph, mode="wrap")
     nv_sorted = np.ascontiguousarray(nv[order])
@@ -113,7 +113,7 @@ def orient_mst(points, normals, k=10, neighbors=None):
 
 @njit(parallel=True, cache=True)
 def nearest_in_lists(points, query_points, indptr, indices, k):
-    """The ``k`` nearest neighbours of each query point among its CSR neighbour list.
+    """The ``k`` nearest neighbors of each query point among its CSR neighbor list.
 
     Returns (m, k) int64 point indices, nearest first, padded with -1; points coinciding with
     the query point (the point itself) are left out.
@@ -158,7 +158,7 @@ def _find_root(parent, i):
 
 @njit(cache=True)
 def orient_spanning_tree(normals, neighbors, levels):
-    """Consistent signs of unit normals along a minimum spanning tree of a neighbour graph.
+    """Consistent signs of unit normals along a minimum spanning tree of a neighbor graph.
 
     The graph joins each point i to ``neighbors[i]`` ((n, k) int, -1 = none) with weight
     ``1 - |n_i . n_j|`` (Hoppe et al. 1992). Kruskal's algorithm runs on the weights rounded to

@@ -11,9 +11,9 @@ __all__ = ["pca_normals", "pca_normals_csr"]
 
 @njit(parallel=True, cache=True)
 def pca_normals_csr(points, query_points, indptr, indices, radius):
-    """Unit normals (m, 3) of the least-squares plane through each query point's neighbours.
+    """Unit normals (m, 3) of the least-squares plane through each query point's neighbors.
 
-    The covariance of the neighbours within ``radius`` (the point included) is accumulated
+    The covariance of the neighbors within ``radius`` (the point included) is accumulated
     about the query point in units of ``radius`` (precise at large offsets) and corrected to
     the centroid; its smallest eigenvector comes from Jacobi rotations. NaN rows
     where fewer than 3 points lie in the ball or the covariance is not finite. Signs are
@@ -77,12 +77,12 @@ def pca_normals_csr(points, query_points, indptr, indices, radius):
 
 
 def pca_normals(points, query_points, indptr, indices, radius):
-    """Normals of the least-squares plane through each query point's neighbourhood (PCA).
+    """Normals of the least-squares plane through each query point's neighborhood (PCA).
 
     Parameters
     ----------
     points : (n, 3) float64; query_points : (m, 3) float64
-    indptr, indices : CSR neighbour lists into ``points``; radius : float, model units
+    indptr, indices : CSR neighbor lists into ``points``; radius : float, model units
 
     Returns
     -------

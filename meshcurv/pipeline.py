@@ -245,9 +245,8 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan):
     d1, d2 = np.empty((b, 3)), np.empty((b, 3))
     status = np.empty(b, dtype=np.int8)
     blend = beta if plan.weighting == "auto" else weight_blend(noise, radius, plan.weighting)
-    fused.curvature_cga(search.points, xb, qb, indptr, indices, radius, *plan.fit[:4], blend,
-                        *plan.fit[4:], k1, k2, d1, d2, samples, residual, nbrs, status,
-                        search.rank)
+    fused.curvature_cga(search.points, xb, qb, indptr, indices, radius, blend, plan.fit,
+                        (k1, k2, d1, d2, samples, residual, nbrs, status), search.rank)
     out.k1[pos], out.k2[pos], out.d1[pos], out.d2[pos] = k1, k2, d1, d2
     out.normals[pos], out.n_samples[pos], out.residual[pos] = qb, samples, residual
     out.n_neighbors[pos], out.noise[pos], out.status[pos] = nbrs, noise, status

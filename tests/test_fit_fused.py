@@ -36,14 +36,14 @@ def test_kernel_matches_numpy_reference(options):
                status=np.empty(m, dtype=np.int8))
     opt = dict(n_directions=8, slab=0.25, blend=1.0, circle_normalization="tangent",
                section_blend=True, half_frequency=False, robust=True) | options
-    fused.curvature_cga(v, v, s.normals, indptr, indices, radius, opt["n_directions"],
-                          opt["slab"], 3.0, 0.25, np.full(m, opt["blend"]),
-                          opt["circle_normalization"] == "unit", opt["section_blend"],
-                          opt["half_frequency"], opt["robust"], *out.values())
+    fit = (opt["n_directions"], opt["slab"], 3.0, 0.25, opt["circle_normalization"] == "unit",
+           opt["section_blend"], opt["half_frequency"], opt["robust"])
+    fused.curvature_cga(v, v, s.normals, indptr, indices, radius, np.full(m, opt["blend"]), fit,
+                        tuple(out.values()))
     checked = 0
     for i in range(0, m, 7):
-        ref = fused_spec.curvature_at_point(v[i], s.normals[i], v[indices[indptr[i]:indptr[i + 1]]],
-                                           radius, **opt)
+        ref = fused_spec.curvature_at_point(v[i], s.normals[i],
+                                            v[indices[indptr[i]:indptr[i + 1]]], radius, **opt)
         for key in ("k1", "k2", "residual"):
             assert out[key][i] == pytest.approx(ref[key], rel=1e-9, abs=1e-9, nan_ok=True), key
         assert out["n_samples"][i] == ref["n_samples"]

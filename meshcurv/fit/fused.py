@@ -109,10 +109,8 @@ def _write_directions(q, theta1, tu, tv, n, d1, d2):
 
 
 @njit(parallel=True, cache=True)
-def curvature_cga(points, query_points, query_normals, indptr, indices, radius, ndir, slab,
-                  min_points, min_spread, blend, unit_norm, corrected, half_frequency,
-                  robust, k1, k2, d1, d2, n_samples, residual, n_neighbors, status,
-                  rank=None):
+def curvature_cga(points, query_points, query_normals, indptr, indices, radius, blend, opts,
+                  out, rank=None):
     """Fused CGA circle-fit estimator over query points with CSR neighbor lists.
 
     Parameters
@@ -122,23 +120,27 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
     indptr, indices : CSR lists into ``points``: neighbors of query q are
         ``indices[indptr[q]:indptr[q+1]]`` (the query point itself may be present; coincident
         points are skipped)
-    radius : float, model units; slab, min_spread : fractions of ``radius``
+    radius : float, model units
     blend : (m,) float64 in [0, 1], per query point: 0 equal weights, 1 distance weights
         (1 - r^2 / radius^2)^WEIGHT_POWER, between the two a mix of both weight functions
-    unit_norm : bool, circle fits normalised by |t| = 1 (the paper) instead of t1 = 1
-    corrected, half_frequency, robust : bool, ``section_blend``, ``half_frequency`` and
-        ``robust`` of :func:`meshcurv.principal_curvatures`
-    Outputs k1, k2 (m,), d1, d2 (m, 3), n_samples, residual, n_neighbors (m,) are written in
-    place; NaN where no estimate is possible; status (m,) int8 says why
-    (:class:`meshcurv.result.Status`).
+    opts : ``(ndir, slab, min_points, min_spread, unit_norm, corrected, half_frequency,
+        robust)`` (int, float, float, float, bool x 4): planes, the slab's half-width and the
+        farthest reach a half-set needs (fractions of ``radius``), the fewest points of a
+        half-set; ``unit_norm`` circle fits normalised by |t| = 1 (the paper) instead of
+        t1 = 1; ``section_blend``, ``half_frequency``, ``robust`` of
+        :func:`meshcurv.principal_curvatures` (:attr:`meshcurv.options.Plan.fit`)
+    out : ``(k1, k2, d1, d2, n_samples, residual, n_neighbors, status)``, (m,) or (m, 3)
+        arrays written in place: NaN where no estimate is possible, and ``status`` (m,) int8
+        says why (:class:`meshcurv.result.Status`)
     rank : (n,) int64, optional, the input index of each row of ``points`` when they are stored
         in another order (e.g. a grid's sorted copy, for memory locality): the tangent frame's
         lowest-index rule then picks the same neighbor as on the input.
     """
+    k1, k2, d1, d2, n_samples, residual, n_neighbors, status = out
+    ndir = opts[0]
     m = query_points.shape[0]
     nh = 2 * ndir
     planes = sampling_planes(ndir)
-    opts = (ndir, slab, min_points, min_spread, unit_norm, corrected, half_frequency, robust)
     nchunks = (m + CHUNK - 1) // CHUNK
     for c in prange(nchunks):
         work = (np.empty((nh, N_ACC)), np.empty(nh), np.empty((nh, 5)), np.empty(nh),

@@ -3,6 +3,13 @@ circle fits (Seibert, Hildenbrand, Becker, Kuijper).
 
 Sign convention: outward normal, convex positive, k1 >= k2; radius in model units.
 
+Layout: :mod:`~meshcurv.api` (entry points: input checks, radius policy, options),
+:mod:`~meshcurv.options` (the one option table), :mod:`~meshcurv.pipeline` (the block loop),
+:mod:`~meshcurv.result` (CurvatureResult, Status, the field schema); the steps of the paper as
+compiled kernels with their numpy specifications in :mod:`meshcurv.neighbors`,
+:mod:`meshcurv.normals` and :mod:`meshcurv.fit` (frame, circle, euler, jet, fused), on the
+3x3 helpers of :mod:`~meshcurv.linalg`.
+
 >>> import meshcurv
 >>> res = meshcurv.principal_curvatures(vertices, faces)        # doctest: +SKIP
 >>> res.k1, res.k2, res.d1, res.d2, res.shape_index, res.valid  # doctest: +SKIP

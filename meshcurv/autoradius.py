@@ -1,4 +1,4 @@
-"""Automatic neighbourhood radius from the sampling density, a noise estimate and a bias probe.
+"""Automatic neighborhood radius from the sampling density, a noise estimate and a bias probe.
 
 The mean curvature error of the estimator at radius R is modelled as noise plus bias,
 
@@ -36,6 +36,11 @@ Usage from the estimator (``radius="auto"``), with every option of that call exc
 import numpy as np
 from scipy.spatial import cKDTree
 
+from . import pipeline
+from .inputs import as_arrays
+from .neighbors import default_radius, power_of_two_scale, typical_extent
+from .options import resolve_plan
+
 __all__ = ["auto_radius", "estimate_sampling", "NOISE_GAIN"]
 
 # Curvature error per unit sigma / (sqrt(rho) R^3) for each circle-fit weighting, measured
@@ -53,7 +58,7 @@ def _sample(n, size, seed):
 def estimate_sampling(vertices, k=24, sample=2000, seed=0):
     """Sampling density and normal noise of a point set, from local quadric fits.
 
-    At each of up to ``sample`` vertices the ``k`` nearest neighbours (itself included) are put
+    At each of up to ``sample`` vertices the ``k`` nearest neighbors (itself included) are put
     in their PCA frame and a quadric ``h = a + b u + c v + d u^2 + e uv + f v^2`` is fitted; the
     RMS residual, corrected for the 6 fitted parameters, estimates the noise along the normal
     (a quadric absorbs the curvature, so a clean smooth surface gives ~0).
@@ -61,7 +66,7 @@ def estimate_sampling(vertices, k=24, sample=2000, seed=0):
     Parameters
     ----------
     vertices : (n, 3) float, model units (NaN rows ignored)
-    k : int, neighbours per fit (>= 10)
+    k : int, neighbors per fit (>= 10)
     sample : int, vertices used (chosen at random with ``seed``)
 
     Returns
@@ -98,7 +103,7 @@ def estimate_sampling(vertices, k=24, sample=2000, seed=0):
         density = float(np.median(k / (np.pi * np.maximum(dist[:, -1], 1e-300) ** 2)))
     with np.errstate(over="ignore", invalid="ignore"):
         q = v[nb] - v[nb].mean(axis=1, keepdims=True)                # (s, k, 3)
-    # neighbourhoods too large for the quadric's moments in float64 (a far point's): left out
+    # neighborhoods too large for the quadric's moments in float64 (a far point's): left out
     sane = np.all(np.abs(q) < 1e60, axis=(1, 2))   # design moments: 4th powers
     idx, q = idx[~far][sane], q[sane]
     if len(q) == 0:
@@ -118,10 +123,40 @@ def estimate_sampling(vertices, k=24, sample=2000, seed=0):
     return density, sigma
 
 
+def _pilot(v, faces, normals, finite, sample, seed, settings):
+    """The pilot estimate ``radius -> CurvatureResult`` on a sample of the (used, finite)
+    vertices, with the caller's ``settings`` (PCA normals unless they say otherwise)."""
+    if faces is not None:
+        used = np.unique(np.asarray(faces, dtype=np.int64).ravel())
+        pool = used[finite[used]]
+    else:
+        pool = np.flatnonzero(finite)
+    query = pool[_sample(len(pool), sample, seed + 1)]
+    pilot = dict(normal_estimation="pca")
+    pilot.update(settings)
+    plan = resolve_plan(faces is not None, normals is not None, **pilot)
+
+    def estimate(radius):
+        return pipeline.run(v, faces, normals, float(radius), query, plan)
+    return estimate
+
+
+def _balanced_radius(gain, sigma, density, beta, r_min, r_max):
+    """The radius where noise and bias errors balance, d/dR (C sigma / (sqrt(rho) R^3) +
+    beta R^2) = 0, within [r_min, r_max]."""
+    if beta > 0 and sigma > 0:
+        radius = (3 * gain * sigma / (2 * beta * np.sqrt(density))) ** 0.2
+    elif beta > 0:
+        radius = r_min
+    else:
+        radius = r_max
+    return float(min(max(radius, r_min), r_max))
+
+
 def auto_radius(vertices, faces=None, normals=None, *, weighting="none", min_points=40,
                 max_angle=0.7, max_fraction=0.25, tolerance=0.05, probe_ratio=1.6, sample=2000,
                 seed=0, details=False, **settings):
-    """Neighbourhood radius for :func:`meshcurv.principal_curvatures` that balances noise and
+    """Neighborhood radius for :func:`meshcurv.principal_curvatures` that balances noise and
     bias (module docstring), chosen per mesh.
 
     Parameters
@@ -163,21 +198,12 @@ def auto_radius(vertices, faces=None, normals=None, *, weighting="none", min_poi
     >>> bool(0.6 < r <= 0.7)      # no bias on a sphere: the largest ball, 0.7 / kappa
     True
     """
-    from .api import principal_curvatures
-
-    if hasattr(vertices, "vertices") and hasattr(vertices, "faces"):
-        faces = vertices.faces if faces is None else faces
-        vertices = vertices.vertices
-    v = np.asarray(vertices, dtype=np.float64)
-    if v.ndim != 2 or v.shape[1] != 3:
-        raise ValueError(f"vertices must be an (n, 3) array, got shape {v.shape}")
+    v, faces, normals = as_arrays(vertices, faces, normals)
     if not (0 < tolerance and 0 < max_angle and 0 < max_fraction and probe_ratio > 1):
         raise ValueError("tolerance, max_angle, max_fraction must be positive, probe_ratio > 1")
     if weighting not in NOISE_GAIN:
         raise ValueError(f"weighting must be one of {sorted(NOISE_GAIN)}, got {weighting!r}")
     gain = NOISE_GAIN[weighting]
-    from .neighbors import power_of_two_scale, typical_extent
-
     s = power_of_two_scale(typical_extent(v, sample, seed))
     if s != 1.0:
         # a cloud too large (small) to square its lengths in float64: measured on coordinates
@@ -197,25 +223,13 @@ def auto_radius(vertices, faces=None, normals=None, *, weighting="none", min_poi
                       if finite.sum() >= 24 else (np.nan, np.nan))
     if not (np.isfinite(density) and density > 0 and np.isfinite(sigma)):
         # too few (distinct) points for the noise estimate: the sampling-only default
-        from .neighbors import default_radius
-
         radius = default_radius(v)
         return (radius, dict(density=np.nan, sigma=np.nan, kappa=np.nan, beta=np.nan,
                              r_min=radius, r_max=radius, probes=())) if details else radius
     with np.errstate(over="ignore", invalid="ignore"):        # far points: inf
         diag = float(np.linalg.norm(np.ptp(v[finite], axis=0)))
     r_min = np.sqrt(min_points / (np.pi * density))
-    if faces is not None:
-        used = np.unique(np.asarray(faces, dtype=np.int64).ravel())
-        pool = used[finite[used]]
-    else:
-        pool = np.flatnonzero(finite)
-    query = pool[_sample(len(pool), sample, seed + 1)]
-    pilot = dict(normal_estimation="pca")
-    pilot.update(settings, weighting=weighting)
-
-    def estimate(radius):
-        return principal_curvatures(v, faces, normals, radius=radius, query=query, **pilot)
+    estimate = _pilot(v, faces, normals, finite, sample, seed, dict(settings, weighting=weighting))
 
     def noise(radius):
         return gain * sigma / (np.sqrt(density) * radius ** 3)
@@ -243,14 +257,7 @@ def auto_radius(vertices, faces=None, normals=None, *, weighting="none", min_poi
     if np.isfinite(kappa_b) and kappa_b > 0:
         kappa = kappa_b
         r_max = max(r_min, min(max_fraction * diag, max_angle / kappa))
-    # d/dR (C sigma / (sqrt(rho) R^3) + beta R^2) = 0
-    if beta > 0 and sigma > 0:
-        radius = (3 * gain * sigma / (2 * beta * np.sqrt(density))) ** 0.2
-    elif beta > 0:
-        radius = r_min
-    else:
-        radius = r_max
-    radius = float(min(max(radius, r_min), r_max))
+    radius = _balanced_radius(gain, sigma, density, beta, r_min, r_max)
     if details:
         return radius, dict(density=density, sigma=sigma, kappa=kappa, beta=beta, r_min=r_min,
                             r_max=r_max, probes=(r_a, r_b), change=change)

@@ -4,9 +4,11 @@ The API, the command line, the pymeshlab filter and tiled runs check options her
 work starts (and without loading the compiled kernels).
 """
 
+from typing import NamedTuple
+
 import numpy as np
 
-__all__ = ["OPTION_NAMES", "CHOICES", "MAX_DIRECTIONS", "check_options"]
+__all__ = ["OPTION_NAMES", "CHOICES", "MAX_DIRECTIONS", "check_options", "Plan", "resolve_plan"]
 
 # Keyword options of principal_curvatures besides the data (vertices, faces, normals) and the
 # call's own switches (query, progress); tests hold this table to the function's signature.
@@ -67,3 +69,61 @@ def check_options(**options):
         raise ValueError(f"orientation must be 'mst' or a finite (3,) viewpoint, "
                          f"got {options['orientation']!r}")
     return orientation
+
+
+class Plan(NamedTuple):
+    """How one estimate runs, resolved from the options and what the input holds
+    (:func:`resolve_plan`); read by :func:`meshcurv.pipeline.run`.
+
+    ``use_kring``: k-ring neighborhoods (else ball queries). ``normals``: "given" (used as
+    they are), "faces" (area-weighted face normals), "pca" (plane fits block by block, oriented
+    like the face normals if there are faces, else towards ``viewpoint``) or "mst" (plane fits
+    of all points first, oriented along a spanning tree). ``refine``: quadric-refined normals.
+    ``weighting``: as the option. ``fit``: the fused kernel's settings ``(n_directions, slab,
+    min_points, min_spread, unit_norm, section_blend, half_frequency, robust)``, typed.
+    """
+
+    use_kring: bool
+    normals: str
+    viewpoint: object
+    refine: bool
+    weighting: str
+    fit: tuple
+
+
+def resolve_plan(has_faces, has_normals, n_directions=8, neighborhood="auto", slab=0.25,
+                 min_points=3, min_spread=0.25, weighting="auto",
+                 circle_normalization="tangent", section_blend=True, robust=True,
+                 half_frequency=False, normal_estimation="auto", refine_normals=None,
+                 orientation="mst"):
+    """The :class:`Plan` of a call with these options (the defaults of
+    :func:`meshcurv.principal_curvatures`) on input with or without faces and given normals.
+
+    Raises ValueError (one line) where :func:`check_options` does, and for a k-ring
+    neighborhood or face normals without faces.
+
+    >>> resolve_plan(False, False).normals
+    'mst'
+    >>> resolve_plan(True, False, neighborhood="ball").use_kring
+    False
+    """
+    orientation = check_options(neighborhood=neighborhood, normal_estimation=normal_estimation,
+                                orientation=orientation, weighting=weighting,
+                                circle_normalization=circle_normalization,
+                                n_directions=n_directions)
+    if neighborhood == "kring" and not has_faces:
+        raise ValueError("neighborhood='kring' needs faces")
+    if normal_estimation == "faces" and not has_normals and not has_faces:
+        raise ValueError("normal_estimation='faces' needs faces")
+    viewpoint = None if isinstance(orientation, str) else orientation
+    if has_normals:
+        normals = "given"
+    elif normal_estimation == "faces":
+        normals = "faces"
+    else:
+        normals = "pca" if has_faces or viewpoint is not None else "mst"
+    fit = (int(n_directions), float(slab), float(min_points), float(min_spread),
+           circle_normalization == "unit", bool(section_blend), bool(half_frequency),
+           bool(robust))
+    refine = not has_normals if refine_normals is None else bool(refine_normals)
+    return Plan(has_faces and neighborhood != "ball", normals, viewpoint, refine, weighting, fit)

@@ -2,15 +2,46 @@
 writer (PLY, LAS/LAZ, the pymeshlab filter) uses."""
 
 from dataclasses import dataclass
+from enum import IntEnum
 
 import numpy as np
 
 from . import shape
+from .fit import constants
 
-__all__ = ["CurvatureResult", "CURVATURE_FIELDS", "curvature_fields"]
+__all__ = ["CurvatureResult", "Status", "CURVATURE_FIELDS", "curvature_fields"]
 
 # Per-vertex curvature fields of every annotated file (PLY properties, LAS extra bytes).
 CURVATURE_FIELDS = shape.FIELDS + ("valid", "d1x", "d1y", "d1z", "d2x", "d2y", "d2z")
+
+
+class Status(IntEnum):
+    """Why a vertex has an estimate or not: ``CurvatureResult.status`` (int8), the first reason
+    the estimator met.
+
+    - ``OK`` (0): estimated (``valid``).
+    - ``NO_POSITION`` (1): the vertex's coordinates are NaN or infinite.
+    - ``NO_NORMAL`` (2): its normal is zero, NaN or infinite (e.g. fewer than 3 points for a
+      plane fit, a vertex in no face).
+    - ``TOO_FEW_NEIGHBORS`` (3): fewer than ``min_points`` neighbors within the radius: no
+      half-set can be fitted (an isolated point, a radius below the spacing).
+    - ``TOO_FEW_HALF_SETS`` (4): fewer than 5 half-sets with enough points reaching far enough,
+      or fewer than 3 planes with one (borders, holes, one-sided neighborhoods).
+    - ``ILL_POSED_FIT`` (5): the Euler model's least-squares system is singular, or too few
+      circle fits remain after the robust refit.
+    - ``DEGENERATE_DIRECTIONS`` (6): the directions the circle fits measured do not span the
+      Euler model (neighbors along one curve, e.g. the rim of a triangle fan).
+    - ``OUT_OF_RANGE`` (7): the curvatures exceed float64 (clouds of subnormal size).
+    """
+
+    OK = constants.STATUS_OK
+    NO_POSITION = constants.STATUS_NO_POSITION
+    NO_NORMAL = constants.STATUS_NO_NORMAL
+    TOO_FEW_NEIGHBORS = constants.STATUS_TOO_FEW_NEIGHBORS
+    TOO_FEW_HALF_SETS = constants.STATUS_TOO_FEW_HALF_SETS
+    ILL_POSED_FIT = constants.STATUS_ILL_POSED_FIT
+    DEGENERATE_DIRECTIONS = constants.STATUS_DEGENERATE_DIRECTIONS
+    OUT_OF_RANGE = constants.STATUS_OUT_OF_RANGE
 
 
 @dataclass
@@ -24,12 +55,14 @@ class CurvatureResult:
     d1, d2 : (n, 3) float64, unit principal directions; ``(d1, d2, normals)`` is right-handed
     normals : (n, 3) float64, the unit normals used (given, from faces, or estimated)
     valid : (n,) bool
-    n_neighbors : (n,) int32, neighbours within the radius
+    n_neighbors : (n,) int32, neighbors within the radius
     n_samples : (n,) int32, circle fits used in the Euler fit (at most ``2 * n_directions``)
     residual : (n,) float64, RMS residual of the Euler fit, 1 / model units
-    noise : (n,) float64, RMS height residual of a local cubic fit over the neighbourhood,
+    noise : (n,) float64, RMS height residual of a local cubic fit over the neighborhood,
         model units: an estimate of the noise along the normal (NaN with fewer than 11 points)
-    radius : float, the neighbourhood radius used, model units
+    radius : float, the neighborhood radius used, model units
+    status : (n,) int8, why a row has no estimate (:class:`Status`; ``Status.OK`` where
+        ``valid``), or None where the producer does not tell
     """
 
     k1: np.ndarray
@@ -43,6 +76,7 @@ class CurvatureResult:
     residual: np.ndarray
     noise: np.ndarray
     radius: float
+    status: np.ndarray = None
 
     @property
     def mean(self):

@@ -283,16 +283,20 @@ def first_call_times():
 def stage_times(v, f, normals, radius):
     """Where the time of a meshcurv call goes: seconds per compiled kernel, and the rest.
 
-    Every function of :mod:`meshcurv.kernels` is wrapped with a timer for the duration of one
+    Every public compiled kernel (meshcurv.neighbors, .normals, .fit) is wrapped with a timer for the duration of one
     call with the normals given and one with them estimated; the kernels are the leaves of the
     pipeline (neighbour search, normals, orientation, circle fits), and what remains of the
     call's time is numpy and Python glue. Returns ``{mode: {stage: seconds}}``.
     """
     import meshcurv
-    from meshcurv import kernels
+    from meshcurv.fit import fused, jet
+    from meshcurv.neighbors import grid, kring
+    from meshcurv.normals import orient, pca
 
     spent = {}
-    originals = {name: fn for name, fn in vars(kernels).items()
+    # the kernels the pipeline calls from Python, by module
+    originals = {(module, name): fn for module in (grid, kring, pca, orient, jet, fused)
+                 for name, fn in vars(module).items()
                  if hasattr(fn, "py_func") and not name.startswith("_")}
 
     def timed(name, fn):
@@ -306,8 +310,8 @@ def stage_times(v, f, normals, radius):
 
     out = {}
     try:
-        for name, fn in originals.items():
-            setattr(kernels, name, timed(name, fn))
+        for (module, name), fn in originals.items():
+            setattr(module, name, timed(name, fn))
         for mode, kwargs in (("normals given", dict(normals=normals)),
                              ("normals estimated", dict(normal_estimation="pca"))):
             spent.clear()
@@ -319,8 +323,8 @@ def stage_times(v, f, normals, radius):
             stages["total"] = total
             out[mode] = stages
     finally:
-        for name, fn in originals.items():
-            setattr(kernels, name, fn)
+        for (module, name), fn in originals.items():
+            setattr(module, name, fn)
     return out
 
 

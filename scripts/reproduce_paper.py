@@ -153,9 +153,9 @@ def circle_curvature(points, normalization="unit"):
 
     ``points`` : (k, 2) float relative to the estimation point (which is added, exactly).
     ``normalization`` : "unit" (the paper's |t| = 1 eigenvector) or "tangent" (t1 = 1, the
-    estimator's default), see :func:`meshcurv.cga.fit_normal_circle`.
+    estimator's default), see :func:`meshcurv.fit.circle_spec.fit_normal_circle`.
     """
-    from meshcurv.cga import fit_normal_circle
+    from meshcurv.fit.circle_spec import fit_normal_circle
 
     q = np.column_stack([points[:, 0], np.zeros(len(points)), points[:, 1]])
     q = np.vstack([np.zeros((1, 3)), q])
@@ -260,7 +260,7 @@ def sine_fit_experiment(counts, sigmas, trials, seed=0):
     Gaussian noise sigma on kappa. "residual RMS" is the paper's measure (samples against the
     fitted function); "model RMS" compares the fitted and the true function over all angles.
     """
-    from meshcurv.sinefit import euler_design
+    from meshcurv.fit.euler_spec import euler_design
 
     rng = np.random.default_rng(seed)
     truth = np.asarray(EULER_TRUTH)

@@ -124,10 +124,10 @@ def test_readme_command_writes_ply_and_png_and_creates_the_directory(tmp_path, c
 @pytest.mark.parametrize("warm", [False, True])
 def test_first_run_says_it_compiles(tmp_path, capsys, inputs, monkeypatch, warm):
     """A cold numba cache (first run after installing) is announced on stderr, once per run."""
-    from meshcurv import kernels
+    from meshcurv.fit import fused
 
-    assert isinstance(kernels.cache_is_warm(), bool)
-    monkeypatch.setattr(kernels, "cache_is_warm", lambda: warm)
+    assert isinstance(fused.cache_is_warm(), bool)
+    monkeypatch.setattr(fused, "cache_is_warm", lambda: warm)
     code, stdout, err = run(capsys, "annotate", inputs / "torus.ply", "-o", tmp_path / "t.ply")
     assert code == 0
     assert ("compiling the numba kernels" in err) != warm

@@ -10,10 +10,9 @@ Error measures used throughout:
 
 import numpy as np
 import pytest
-from scipy.spatial import cKDTree
 
 import meshcurv
-from meshcurv import kernels, reference, surfaces
+from meshcurv import surfaces
 
 
 def interior(surface, radius):
@@ -33,75 +32,6 @@ def direction_error_deg(surface, res, mask):
     sel = mask & aniso & np.isfinite(surface.d1).all(axis=1)
     cosang = np.abs(np.einsum("ij,ij->i", res.d1[sel], surface.d1[sel]))
     return np.degrees(np.arccos(np.clip(cosang, 0, 1))).mean()
-
-
-# ---------------------------------------------------------------- kernel vs numpy reference
-
-def sorted_ball_csr(points, radius):
-    tree = cKDTree(points)
-    lists = [sorted(tree.query_ball_point(p, radius)) for p in points]
-    indptr = np.concatenate([[0], np.cumsum([len(lst) for lst in lists])]).astype(np.int64)
-    return indptr, np.concatenate(lists).astype(np.int64)
-
-
-@pytest.mark.parametrize("options", [
-    dict(),
-    dict(blend=0.0),
-    dict(blend=0.37, circle_normalization="unit"),
-    dict(section_blend=False, robust=False),
-    dict(half_frequency=True, n_directions=6, slab=0.4),
-])
-def test_kernel_matches_numpy_reference(options):
-    """The compiled kernel and the readable reference agree to round-off (1e-9) on a noisy torus."""
-    rng = np.random.default_rng(1)
-    s = surfaces.torus(n_major=100, n_minor=30)
-    v = s.vertices + rng.normal(scale=0.01, size=s.vertices.shape)
-    radius = 0.45
-    indptr, indices = sorted_ball_csr(v, radius)
-    m = len(v)
-    out = dict(k1=np.empty(m), k2=np.empty(m), d1=np.empty((m, 3)), d2=np.empty((m, 3)),
-               n_samples=np.empty(m), residual=np.empty(m), n_neighbors=np.empty(m))
-    opt = dict(n_directions=8, slab=0.25, blend=1.0, circle_normalization="tangent",
-               section_blend=True, half_frequency=False, robust=True) | options
-    kernels.curvature_cga(v, v, s.normals, indptr, indices, radius, opt["n_directions"],
-                          opt["slab"], 3.0, 0.25, np.full(m, opt["blend"]),
-                          opt["circle_normalization"] == "unit", opt["section_blend"],
-                          opt["half_frequency"], opt["robust"], *out.values())
-    checked = 0
-    for i in range(0, m, 7):
-        ref = reference.curvature_at_point(v[i], s.normals[i], v[indices[indptr[i]:indptr[i + 1]]],
-                                           radius, **opt)
-        for key in ("k1", "k2", "residual"):
-            assert out[key][i] == pytest.approx(ref[key], rel=1e-9, abs=1e-9, nan_ok=True), key
-        assert out["n_samples"][i] == ref["n_samples"]
-        if np.isfinite(ref["k1"]):
-            assert abs(out["d1"][i] @ ref["d1"]) == pytest.approx(1.0, abs=1e-9)
-            checked += 1
-    assert checked > 100
-
-
-def test_local_jet_matches_numpy_reference():
-    """Cubic fit: normals and noise as the reference; 3-degree normal errors come down to the
-    noise level, and the noise estimate finds the noise that was added."""
-    rng = np.random.default_rng(2)
-    s = surfaces.torus(n_major=100, n_minor=30)
-    sigma = 0.005
-    v = s.vertices + rng.normal(scale=sigma, size=(len(s.vertices), 1)) * s.normals
-    radius = 0.3
-    indptr, indices = sorted_ball_csr(v, radius)
-    start = s.normals + rng.normal(scale=0.05, size=v.shape)
-    start /= np.linalg.norm(start, axis=1, keepdims=True)
-    refined = start.copy()
-    noise = np.empty(len(v))
-    kernels.local_jet(v, v, refined, indptr, indices, radius, True, noise)
-    for i in range(0, len(v), 13):
-        normal, nz = reference.local_jet(v[i], start[i], v[indices[indptr[i]:indptr[i + 1]]], radius)
-        np.testing.assert_allclose(refined[i], normal, atol=1e-9)
-        assert noise[i] == pytest.approx(nz, rel=1e-9)
-    err = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", refined, s.normals), -1, 1)))
-    assert err.mean() < 1.0
-    # the RMS of the added N(0, sigma) heights, up to the fit's and the weights' small effects
-    assert np.median(noise) == pytest.approx(sigma, rel=0.15)
 
 
 def test_auto_weighting_follows_the_noise():

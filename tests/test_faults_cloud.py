@@ -14,7 +14,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import meshcurv
-from meshcurv import api, kernels, normals, options, reference
+from meshcurv import api, normals, options, pipeline
+from meshcurv.fit import fused_spec
 from meshcurv.neighbors import ball_grid, ball_neighbors, default_radius, spatial_order
 
 # icosphere(3): 642 vertices; its own default radius, given explicitly to both runs
@@ -196,14 +197,14 @@ def test_a_radius_far_too_large_is_computed_and_explained():
 
 
 def test_an_infeasible_radius_is_refused_in_one_line(monkeypatch):
-    monkeypatch.setattr(api, "MAX_PAIRS", 1e5)
+    monkeypatch.setattr(pipeline, "MAX_PAIRS", 1e5)
     with pytest.raises(ValueError, match="too large for these points") as exc:
         meshcurv.principal_curvatures(SPHERE.vertices, radius=10.0)
     assert "\n" not in str(exc.value) and "smaller radius" in str(exc.value)
 
 
 def test_large_balls_are_computed_in_smaller_blocks(monkeypatch, alone):
-    monkeypatch.setattr(api, "_BLOCK_ENTRIES", 2000)         # ~30 queries per block
+    monkeypatch.setattr(pipeline, "BLOCK_ENTRIES", 2000)         # ~30 queries per block
     res = meshcurv.principal_curvatures(SPHERE.vertices, radius=RADIUS)
     assert np.array_equal(res.k1, alone["given"].k1)
 
@@ -234,7 +235,7 @@ def test_reference_refuses_a_fan_rim_as_the_kernel_does():
     for i in (5, 20):
         nb = v[np.linalg.norm(v - v[i], axis=1) <= 0.6]
         for blend in (0.0, 1.0):
-            out = reference.curvature_at_point(v[i], [0, 0, 1.0], nb, 0.6, blend=blend)
+            out = fused_spec.curvature_at_point(v[i], [0, 0, 1.0], nb, 0.6, blend=blend)
             assert np.isnan(out["k1"])
 
 

@@ -38,3 +38,16 @@ def test_bad_options_are_refused_in_one_line_before_any_work(name, bad, message)
 def test_check_options_returns_the_orientation():
     assert options.check_options() == "mst"
     np.testing.assert_array_equal(options.check_options(orientation=[1, 2, 3]), [1.0, 2.0, 3.0])
+
+
+def test_resolve_plan_has_the_defaults_of_principal_curvatures():
+    """The pilot runs of radius="auto" resolve options without the API: same defaults."""
+    import inspect
+
+    api_defaults = {k: p.default for k, p in
+                    inspect.signature(meshcurv.principal_curvatures).parameters.items()
+                    if k in options.OPTION_NAMES and k != "radius"}
+    plan_defaults = {k: p.default for k, p in
+                     inspect.signature(options.resolve_plan).parameters.items()
+                     if k in options.OPTION_NAMES}
+    assert plan_defaults == api_defaults

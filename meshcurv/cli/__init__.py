@@ -236,9 +236,9 @@ def main(argv=None):
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command in ("annotate", "batch"):
-        from .. import kernels
+        from ..fit import fused
 
-        if not kernels.cache_is_warm():
+        if not fused.cache_is_warm():
             print("meshcurv: compiling the numba kernels (first run after installing, about "
                   "30 s; cached afterwards)", file=sys.stderr)
     try:

@@ -88,7 +88,9 @@ def result_rows(res):
 
 def gather(work, tiles, chunk_id, first, count):
     """Result arrays of points ``first .. first + count - 1`` from the tiles that own them; points
-    no tile owns (non-finite coordinates) keep NaN / 0 / False."""
+    no tile owns (non-finite coordinates) keep NaN / 0 / False and status NO_POSITION."""
+    from ..result import Status
+
     out = {}
     for name in tiles:
         with np.load(os.path.join(work, "results", name, f"c{chunk_id:06d}.npz")) as z:
@@ -96,14 +98,16 @@ def gather(work, tiles, chunk_id, first, count):
         rows = r.pop("idx") - first
         for k, a in r.items():
             if k not in out:
-                fill = np.nan if a.dtype.kind == "f" else 0
+                fill = (np.nan if a.dtype.kind == "f" else
+                        Status.NO_POSITION if k == "status" else 0)
                 out[k] = np.full((count,) + a.shape[1:], fill, dtype=a.dtype)
             out[k][rows] = a
     if not out:  # a chunk of non-finite points only
         out = {k: np.full(count, np.nan) for k in ("k1", "k2", "residual", "noise")}
         out.update({k: np.full((count, 3), np.nan) for k in ("d1", "d2", "normals")})
         out.update(n_neighbors=np.zeros(count, np.int32), n_samples=np.zeros(count, np.int32),
-                   valid=np.zeros(count, bool))
+                   valid=np.zeros(count, bool),
+                   status=np.full(count, Status.NO_POSITION, np.int8))
     return out
 
 

@@ -1,4 +1,5 @@
-"""Euler model fit: principal curvatures from normal-section curvatures sampled around a point.
+"""Numpy specification of the Euler model fit (:mod:`meshcurv.fit.euler`): principal
+curvatures from normal-section curvatures sampled around a point.
 
 Euler's theorem gives the normal curvature in tangent direction theta as
 ``kappa(theta) = k1 cos^2(theta - theta1) + k2 sin^2(theta - theta1)

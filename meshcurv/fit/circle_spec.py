@@ -1,5 +1,6 @@
-"""Conformal geometric algebra (CGA) pieces of the estimator: the point embedding and the
-osculating-circle fit of one normal section.
+"""Numpy specification of the circle fits (:mod:`meshcurv.fit.circle`): the conformal
+geometric algebra (CGA) point embedding, the osculating-circle fit of one normal section and
+the blend of directions a half-set measures.
 
 A Euclidean point p is embedded as the conformal vector ``P = p + 1/2 |p|^2 e_inf + e_0``; a
 sphere with centre m and radius r is ``S = m + 1/2 (|m|^2 - r^2) e_inf + e_0``; the inner product
@@ -9,7 +10,7 @@ what turns circle fitting into a small eigenvalue problem.
 
 import numpy as np
 
-__all__ = ["conformal_embed", "conformal_inner", "circle_fit_rows", "fit_normal_circle"]
+__all__ = ["conformal_embed", "conformal_inner", "circle_fit_rows", "fit_normal_circle", "sample_mix"]
 
 
 def conformal_embed(points):
@@ -111,3 +112,30 @@ def fit_normal_circle(q, normal, weights=None, normalization="tangent"):
         return np.nan, np.nan     # all points at one distance from x: no circle is defined
     t = np.concatenate([[1.0], np.linalg.solve(b[1:, 1:], -b[1:, 0])])
     return -t[2], max(float(t @ b @ t), 0.0)
+
+
+def sample_mix(r2, phi, weights, theta):
+    """The blend of directions (cos 2phi, sin 2phi) a half-set's circle fit measured
+    (specification of :func:`meshcurv.fit.circle.sample_design`).
+
+    To first order in the heights the fitted curvature is ``sum_p w_p k(phi_p) / sum_p w_p``
+    with ``w_p = wt_p r2_p (r2_p - mean r2)`` (the mean weighted by ``wt``), so the Euler model
+    is fitted to that blend of directions rather than to the plane's nominal one.
+
+    Parameters
+    ----------
+    r2 : (k,) float, squared distances of the half-set's points from x (units of the radius)
+    phi : (k,) float, their angles in the tangent plane, radians
+    weights : (k + 1,) float, the circle fit's weights, x itself (at r2 = 0) first
+    theta : float, the half-set's direction: the fallback where the blend is undefined
+
+    Returns
+    -------
+    (c, s) float: the weighted means of cos 2phi and sin 2phi
+    """
+    rr = np.concatenate([[0.0], r2])
+    wp = weights * rr * (rr - np.sum(weights * rr) / weights.sum())
+    if wp.sum() > 0:
+        return (np.sum(wp[1:] * np.cos(2 * phi)) / wp.sum(),
+                np.sum(wp[1:] * np.sin(2 * phi)) / wp.sum())
+    return (np.cos(2 * theta), np.sin(2 * theta))

@@ -1,0 +1,181 @@
+"""CGA circle fits in the half-sets around a point: accumulate each half-set's sums, then solve
+for the sphere centred on the normal line. Compiled kernels; their numpy specification is
+:mod:`meshcurv.fit.circle_spec`.
+"""
+
+import numpy as np
+from numba import njit
+
+from ..linalg import ball_offset, smallest_eigvec_jacobi3
+from .constants import WEIGHT_POWER
+
+# Columns of the per-half-set accumulator (coordinates scaled by 1/radius). The CGA circle fit
+# needs B = sum w w^T over rows w = (h, -1, -r2/2): the weighted sums of 1, h, h^2, r2, h*r2,
+# r2^2. The sums of r2*cos2phi ... tell the sine fit which blend of directions a half-set really
+# saw (see ``_sample_design``). _CNT counts the points, _EMAX is the farthest reach along the
+# plane's direction.
+_N, _H, _HH, _R, _HR, _RR, _RC, _RRC, _RS, _RRS, _CNT, _EMAX = range(12)
+
+
+N_ACC = 12
+
+
+@njit(cache=True)
+def sample_design(acc, k, corrected, cos2t, sin2t):
+    """Regressors (cos 2theta, sin 2theta) of one circle-fit sample for the Euler model.
+
+    Nominally (cos 2theta, sin 2theta) of the sample's plane direction theta. With
+    ``corrected`` they are the cos/sin 2phi of the half-set's own points, averaged with the weights the circle fit gives them: to first
+    order in the heights, the fitted curvature is sum_p w_p k(phi_p) / sum_p w_p with
+    w_p = r2_p (r2_p - mean r2), so a slab of finite width samples a known blend of directions
+    rather than theta alone, and the Euler model can be fitted to that blend exactly.
+    """
+    if not corrected:
+        return cos2t, sin2t
+    rbar = acc[k, _R] / acc[k, _N]
+    den = acc[k, _RR] - rbar * acc[k, _R]
+    if den <= 0.0:
+        return cos2t, sin2t
+    mc = (acc[k, _RRC] - rbar * acc[k, _RC]) / den
+    ms = (acc[k, _RRS] - rbar * acc[k, _RS]) / den
+    return mc, ms
+
+
+@njit(cache=True)
+def circle_fit(acc, k, unit_norm, b, ev):
+    """CGA circle fit of half-set k from its accumulator row: kappa (scaled units), NaN if
+    degenerate.
+
+    B = [[Shh, -Sh, -Shr/2], [-Sh, N, Sr/2], [-Shr/2, Sr/2, Srr/4]] and the sphere is
+    t = (t1, t2, t3) with kappa = -t3 / t1 (scaled units). ``unit_norm`` minimises t^T B t over
+    |t| = 1 (the paper: smallest eigenvector; ``b`` (3, 3) and ``ev`` (3,) are scratch).
+    Otherwise over t1 = 1, the generalised eigenproblem B t = lambda diag(1, 0, 0) t, i.e. the
+    2x2 system [[N, Sr/2], [Sr/2, Srr/4]] (t2, t3) = (Sh, Shr/2): the same sphere on exact data,
+    but it cannot drift to the spheres centred at x (t1 -> 0) that send |kappa| to infinity
+    under noise.
+    """
+    b11 = acc[k, _HH]
+    b12 = -acc[k, _H]
+    b13 = -0.5 * acc[k, _HR]
+    b22 = acc[k, _N]
+    b23 = 0.5 * acc[k, _R]
+    b33 = 0.25 * acc[k, _RR]
+    if unit_norm:
+        b[0, 0], b[0, 1], b[0, 2] = b11, b12, b13
+        b[1, 0], b[1, 1], b[1, 2] = b12, b22, b23
+        b[2, 0], b[2, 1], b[2, 2] = b13, b23, b33
+        smallest_eigvec_jacobi3(b, ev)
+        if not (abs(ev[0]) > 1e-12 * abs(ev[2])):
+            return np.nan
+        return -ev[2] / ev[0]
+    det = b22 * b33 - b23 * b23
+    if not det > 1e-14 * b22 * b33:
+        return np.nan
+    return -(-b13 * b22 + b12 * b23) / det
+
+
+@njit(cache=True)
+def accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta, planes, slab,
+                         acc):
+    """Accumulate the neighbors ``points[nbr[lo:hi]]`` of x into the half-sets' sums; their count.
+
+    Each neighbor within the ball (``r2max`` the squared radius, ``inv_r`` its inverse; model
+    units) is expressed in the frame (tu, tv, n) in units of the radius and added, with weight
+    ``(1 - beta) + beta (1 - r^2)^WEIGHT_POWER``, to the row of ``acc`` ((2 ndir, N_ACC),
+    zeroed here) of every half-set whose slab (half-width ``slab``) holds it: half-set i on
+    the positive side of plane i's direction ``planes[0][i], planes[1][i]`` (cos, sin), i + ndir
+    on the negative side. Returns the number of neighbors in the ball.
+    """
+    ca, sa = planes[0], planes[1]
+    ndir = ca.shape[0]
+    for k in range(2 * ndir):
+        for c in range(N_ACC):
+            acc[k, c] = 0.0
+    n_nbr = 0
+    for j in range(lo, hi):
+        inside, qx, qy, qz, r2 = ball_offset(points, nbr[j], x[0], x[1], x[2], r2max, inv_r)
+        if not inside:
+            continue
+        n_nbr += 1
+        u = qx * tu[0] + qy * tu[1] + qz * tu[2]
+        v = qx * tv[0] + qy * tv[1] + qz * tv[2]
+        h = qx * n[0] + qy * n[1] + qz * n[2]
+        add_point(acc, u, v, h, r2, beta, ca, sa, slab)
+    return n_nbr
+
+
+@njit(cache=True)
+def add_point(acc, u, v, h, r2, beta, ca, sa, slab):
+    """Add one neighbor at frame coordinates (u, v, h), squared distance r2 (units of the
+    radius), to the accumulator rows of the half-sets whose slabs hold it."""
+    t2 = u * u + v * v
+    if t2 <= 0.0:
+        return
+    ndir = ca.shape[0]
+    w = (1.0 - beta) + beta * (1.0 - r2) ** WEIGHT_POWER
+    c2 = (u * u - v * v) / t2
+    s2 = 2.0 * u * v / t2
+    wr = w * r2
+    wrr = wr * r2
+    for i in range(ndir):
+        if abs(-sa[i] * u + ca[i] * v) > slab:
+            continue
+        e = ca[i] * u + sa[i] * v
+        k = i if e >= 0.0 else i + ndir
+        acc[k, _N] += w
+        acc[k, _H] += w * h
+        acc[k, _HH] += w * h * h
+        acc[k, _R] += wr
+        acc[k, _HR] += wr * h
+        acc[k, _RR] += wrr
+        acc[k, _RC] += wr * c2
+        acc[k, _RRC] += wrr * c2
+        acc[k, _RS] += wr * s2
+        acc[k, _RRS] += wrr * s2
+        acc[k, _CNT] += 1.0
+        if abs(e) > acc[k, _EMAX]:
+            acc[k, _EMAX] = abs(e)
+
+
+@njit(cache=True)
+def half_set_samples(acc, ndir, min_points, min_spread, unit_norm, corrected, dirs, kappa, rows,
+                     mix, active, b3, ev):
+    """Circle fit of every half-set with enough points, as samples of the Euler model.
+
+    A half-set is fitted when it holds ``min_points`` points reaching ``min_spread`` (units of
+    the radius) along its direction; x itself joins it as the row (0, -1, 0) with weight 1.
+    Sample s gets its curvature ``kappa[s]`` (units of 1 / radius), the Euler design row
+    ``rows[s] = (1, cos 2theta, sin 2theta, cos theta, sin theta)`` (the measured direction mix
+    in the second and third column with ``corrected``; ``dirs`` (2 ndir, 4) holds (cos, sin) of
+    theta and 2 theta per half-set), its measured mix ``mix[s]`` and ``active[s] = 1``.
+    ``b3`` (3, 3), ``ev`` (3,) are scratch. Returns ``(m, planes_seen)``: the samples and the
+    planes with at least one of them.
+    """
+    m = 0
+    planes_seen = 0
+    for i in range(ndir):
+        seen = False
+        for side in range(2):
+            k = i + side * ndir
+            if acc[k, _CNT] < min_points or acc[k, _EMAX] < min_spread:
+                continue
+            acc[k, _N] += 1.0
+            kap = circle_fit(acc, k, unit_norm, b3, ev)
+            if not np.isfinite(kap):
+                continue
+            kappa[m] = kap
+            mc, ms = sample_design(acc, k, True, dirs[k, 2], dirs[k, 3])
+            mix[m, 0] = mc
+            mix[m, 1] = ms
+            dc, ds = (mc, ms) if corrected else (dirs[k, 2], dirs[k, 3])
+            rows[m, 0] = 1.0
+            rows[m, 1] = dc
+            rows[m, 2] = ds
+            rows[m, 3] = dirs[k, 0]
+            rows[m, 4] = dirs[k, 1]
+            active[m] = 1.0
+            m += 1
+            seen = True
+        if seen:
+            planes_seen += 1
+    return m, planes_seen

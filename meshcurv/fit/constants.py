@@ -1,0 +1,31 @@
+"""Constants of the estimator shared by the compiled kernels and their numpy specifications
+(plain numbers: importing them loads neither numba nor a kernel)."""
+
+# Exponent p of the distance weights (1 - r^2 / radius^2)^p (measured: p = 2 leaves twice the
+# bias of p = 4 on the Table 2 paraboloid; p = 8 gains little more and doubles the noise again).
+WEIGHT_POWER = 4
+
+
+# Plane i makes the angle (i + PLANE_OFFSET) * pi / ndir with the tangent frame's first axis.
+PLANE_OFFSET = 0.25
+
+
+# Fewest spread of the directions the circle fits measured for an estimate: the smaller
+# eigenvalue of the covariance of their (cos 2phi, sin 2phi) mixes (see ``_sample_design``)
+# over the samples kept. Measured: directions all around ~0.34 (sphere), mesh borders and
+# corners >= 0.15, the border of a random half-sphere cloud >= 0.027, the corners of a random
+# square patch 0.0069 .. 0.0095 (still accurate); neighbors along one curve (the rim of a
+# triangle fan) 0 .. 0.0018: there the Euler model's B and C are not determined, and k1, k2
+# would be noise (often exactly 0) marked valid.
+MIN_DIRECTION_SPREAD = 3e-3
+
+# Why a vertex has no estimate: the kernel's codes of :class:`meshcurv.result.Status` (int8),
+# one per early return (documented there).
+STATUS_OK = 0
+STATUS_NO_POSITION = 1
+STATUS_NO_NORMAL = 2
+STATUS_TOO_FEW_NEIGHBORS = 3
+STATUS_TOO_FEW_HALF_SETS = 4
+STATUS_ILL_POSED_FIT = 5
+STATUS_DEGENERATE_DIRECTIONS = 6
+STATUS_OUT_OF_RANGE = 7

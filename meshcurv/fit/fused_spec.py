@@ -1,0 +1,90 @@
+"""Numpy specification of the fused estimator, one point at a time.
+
+Slow and readable: the paper's steps for a single point, built from the other specifications
+(:mod:`~meshcurv.fit.frame_spec`, :mod:`~meshcurv.fit.circle_spec`,
+:mod:`~meshcurv.fit.euler_spec`). It exists to check the compiled kernel
+(:func:`meshcurv.fit.fused.curvature_cga`), which must agree with it to round-off.
+"""
+
+import numpy as np
+
+from .circle_spec import fit_normal_circle, sample_mix
+from .constants import MIN_DIRECTION_SPREAD, PLANE_OFFSET, WEIGHT_POWER
+from .euler_spec import fit_euler
+from .frame_spec import tangent_u
+
+__all__ = ["curvature_at_point"]
+
+
+def curvature_at_point(x, n, neighbors, radius, n_directions=8, slab=0.25, min_points=3,
+                       min_spread=0.25, blend=1.0, circle_normalization="tangent",
+                       section_blend=True, half_frequency=False, robust=True):
+    """Principal curvatures at one point from its neighbors (the kernel's contract, in numpy).
+
+    Parameters
+    ----------
+    x : (3,) float, the point; n : (3,) float, its unit normal (outward)
+    neighbors : (k, 3) float, candidate neighbors sorted by vertex index (x itself and points
+        beyond ``radius`` are ignored); the first one at least 30 degrees off the normal sets
+        the tangent frame, as the lowest-index one does in the kernel
+    radius : float, model units; ``slab`` and ``min_spread`` are fractions of it
+    blend : float in [0, 1], weights ``(1 - blend) + blend (1 - r^2 / radius^2)^WEIGHT_POWER``
+        (see :func:`meshcurv.pipeline.weight_blend`)
+    other parameters : as in :func:`meshcurv.principal_curvatures`
+
+    Returns
+    -------
+    dict with k1, k2 (float, NaN if undefined, 1 / model units), d1 ((3,) unit), n_samples
+    (int, circle fits kept) and residual (float, RMS of the Euler fit, 1 / model units)
+    """
+    x = np.asarray(x, dtype=np.float64)
+    n = np.asarray(n, dtype=np.float64)
+    n = n / np.linalg.norm(n)
+    q = np.asarray(neighbors, dtype=np.float64) - x
+    d2 = np.einsum("ij,ij->i", q, q)
+    q = q[(d2 > 0) & (d2 <= radius * radius)]
+    tu = tangent_u(q, n)
+    tv = np.cross(n, tu)
+    q = q / radius  # all fits in units of the radius
+    u, v = q @ tu, q @ tv
+    keep = u * u + v * v > 0
+    q, u, v = q[keep], u[keep], v[keep]
+    r2 = np.einsum("ij,ij->i", q, q)
+    phi = np.arctan2(v, u)
+    w = (1 - blend) + blend * (1 - r2) ** WEIGHT_POWER
+
+    kappas, rows, mixes, planes = [], [], [], set()
+    for i in range(n_directions):
+        alpha = (i + PLANE_OFFSET) * np.pi / n_directions
+        dist = -np.sin(alpha) * u + np.cos(alpha) * v    # distance to plane i (through x)
+        along = np.cos(alpha) * u + np.sin(alpha) * v    # coordinate along the plane's tangent
+        in_slab = np.abs(dist) <= slab
+        for side, half in enumerate([in_slab & (along >= 0), in_slab & (along < 0)]):
+            if half.sum() < min_points or np.abs(along[half]).max(initial=0) < min_spread:
+                continue
+            pts = np.vstack([np.zeros(3), q[half]])          # x itself is in every half-set
+            wt = np.concatenate([[1.0], w[half]])
+            kappa, _ = fit_normal_circle(pts, n, wt, circle_normalization)
+            if not np.isfinite(kappa):
+                continue
+            theta = alpha + side * np.pi
+            mix = sample_mix(r2[half], phi[half], wt, theta)
+            c, s = mix if section_blend else (np.cos(2 * theta), np.sin(2 * theta))
+            row = [1.0, c, s] + ([np.cos(theta), np.sin(theta)] if half_frequency else [])
+            kappas.append(kappa)
+            rows.append(row)
+            mixes.append(mix)
+            planes.add(i)
+    out = dict(k1=np.nan, k2=np.nan, d1=np.full(3, np.nan), n_samples=len(kappas),
+               residual=np.nan)
+    if len(planes) < 3 or len(kappas) < 5:
+        return out
+    k1, k2, theta1, rms, used = fit_euler(np.array(rows), np.array(kappas), robust=robust)
+    if not np.isfinite(k1):
+        return out
+    # the measured directions must span the Euler model (not all along one curve)
+    if np.linalg.eigvalsh(np.cov(np.array(mixes)[used].T, bias=True))[0] < MIN_DIRECTION_SPREAD:
+        return out
+    out.update(k1=k1 / radius, k2=k2 / radius, d1=np.cos(theta1) * tu + np.sin(theta1) * tv,
+               n_samples=int(used.sum()), residual=rms / radius)
+    return out

@@ -1,0 +1,134 @@
+"""Numba helpers every compiled kernel shares: the 3x3 symmetric eigensolver (Jacobi), the
+small symmetric solve (Cholesky), the offset of a neighbor inside the ball, and the chunk size
+of the per-point ``prange`` loops.
+
+A leaf: imports nothing of meshcurv.
+"""
+
+import math
+
+from numba import njit
+
+# Points per chunk handed to one thread (keeps scratch arrays per chunk, not per point).
+CHUNK = 256
+
+
+@njit(cache=True)
+def smallest_eigvec_jacobi3(a, out):
+    """Unit eigenvector of the smallest eigenvalue of the symmetric 3x3 ``a`` (overwritten).
+
+    Cyclic Jacobi rotations to machine precision (as accurate as LAPACK's ``eigh`` here, unlike
+    a closed-form cubic); the rotations are accumulated in the local ``v00 .. v22``.
+    """
+    v00 = 1.0
+    v01 = 0.0
+    v02 = 0.0
+    v10 = 0.0
+    v11 = 1.0
+    v12 = 0.0
+    v20 = 0.0
+    v21 = 0.0
+    v22 = 1.0
+    for sweep in range(50):
+        off = a[0, 1] * a[0, 1] + a[0, 2] * a[0, 2] + a[1, 2] * a[1, 2]
+        diag = a[0, 0] * a[0, 0] + a[1, 1] * a[1, 1] + a[2, 2] * a[2, 2]
+        if off <= 1e-36 * diag or off == 0.0:
+            break
+        for pq in range(3):
+            if pq == 0:
+                p, q, r = 0, 1, 2
+            elif pq == 1:
+                p, q, r = 0, 2, 1
+            else:
+                p, q, r = 1, 2, 0
+            apq = a[p, q]
+            if apq == 0.0:
+                continue
+            # rotation angle that zeroes a[p, q] (Golub & Van Loan, sym.schur2)
+            tau = (a[q, q] - a[p, p]) / (2.0 * apq)
+            if tau >= 0.0:
+                t = 1.0 / (tau + math.sqrt(1.0 + tau * tau))
+            else:
+                t = -1.0 / (-tau + math.sqrt(1.0 + tau * tau))
+            c = 1.0 / math.sqrt(1.0 + t * t)
+            s = t * c
+            app = a[p, p]
+            aqq = a[q, q]
+            arp = a[r, p]
+            arq = a[r, q]
+            a[p, p] = app - t * apq
+            a[q, q] = aqq + t * apq
+            a[p, q] = 0.0
+            a[q, p] = 0.0
+            a[r, p] = c * arp - s * arq
+            a[p, r] = a[r, p]
+            a[r, q] = s * arp + c * arq
+            a[q, r] = a[r, q]
+            # columns p, q of the accumulated rotation V
+            if p == 0 and q == 1:
+                v00, v01 = c * v00 - s * v01, s * v00 + c * v01
+                v10, v11 = c * v10 - s * v11, s * v10 + c * v11
+                v20, v21 = c * v20 - s * v21, s * v20 + c * v21
+            elif p == 0:
+                v00, v02 = c * v00 - s * v02, s * v00 + c * v02
+                v10, v12 = c * v10 - s * v12, s * v10 + c * v12
+                v20, v22 = c * v20 - s * v22, s * v20 + c * v22
+            else:
+                v01, v02 = c * v01 - s * v02, s * v01 + c * v02
+                v11, v12 = c * v11 - s * v12, s * v11 + c * v12
+                v21, v22 = c * v21 - s * v22, s * v21 + c * v22
+    k = 0
+    if a[1, 1] < a[k, k]:
+        k = 1
+    if a[2, 2] < a[k, k]:
+        k = 2
+    if k == 0:
+        x, y, z = v00, v10, v20
+    elif k == 1:
+        x, y, z = v01, v11, v21
+    else:
+        x, y, z = v02, v12, v22
+    s = 1.0 / math.sqrt(x * x + y * y + z * z)
+    out[0] = x * s
+    out[1] = y * s
+    out[2] = z * s
+
+
+@njit(cache=True)
+def solve_sym(m, rhs, npar, sol):
+    """Solve the small symmetric positive system m @ sol = rhs by Cholesky; False if singular."""
+    # in place copy-free Cholesky on a (npar, npar) scratch held in m
+    for i in range(npar):
+        for j in range(i + 1):
+            s = m[i, j]
+            for k in range(j):
+                s -= m[i, k] * m[j, k]
+            if i == j:
+                if s <= 1e-12 * max(1.0, abs(m[i, i])):
+                    return False
+                m[i, i] = math.sqrt(s)
+            else:
+                m[i, j] = s / m[j, j]
+    for i in range(npar):
+        s = rhs[i]
+        for k in range(i):
+            s -= m[i, k] * sol[k]
+        sol[i] = s / m[i, i]
+    for i in range(npar - 1, -1, -1):
+        s = sol[i]
+        for k in range(i + 1, npar):
+            s -= m[k, i] * sol[k]
+        sol[i] = s / m[i, i]
+    return True
+
+
+@njit(cache=True)
+def ball_offset(points, k, x0, x1, x2, r2max, inv_r):
+    """Offset of ``points[k]`` from (x0, x1, x2) in units of the radius, and its squared length:
+    ``(inside, qx, qy, qz, r2)``. ``inside`` is False for a coincident point (the query point
+    itself) and beyond the radius: the neighborhood every fit here works on."""
+    qx = points[k, 0] - x0
+    qy = points[k, 1] - x1
+    qz = points[k, 2] - x2
+    d2 = qx * qx + qy * qy + qz * qz
+    return d2 > 0.0 and d2 <= r2max, qx * inv_r, qy * inv_r, qz * inv_r, d2 * inv_r * inv_r

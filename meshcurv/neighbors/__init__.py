@@ -1,0 +1,18 @@
+"""Neighborhoods N(x): radius-limited k-rings over mesh edges, ball queries in point clouds.
+
+Both return CSR lists ``(indptr, indices)``: the neighbors of query ``i`` are
+``indices[indptr[i]:indptr[i + 1]]``, indices into the full vertex array. Points with NaN or
+infinite coordinates are never anyone's neighbor and have no neighbors themselves.
+
+Modules: :mod:`~meshcurv.neighbors.grid` (dense and hashed grid ball search),
+:mod:`~meshcurv.neighbors.kring` (edge adjacency, k-rings), :mod:`~meshcurv.neighbors.csr`
+(the streaming driver both share), :mod:`~meshcurv.neighbors.radius` (default radius).
+"""
+
+from .grid import BallGrid, ball_counts, ball_grid, ball_neighbors, spatial_order
+from .kring import KringWork, edge_adjacency, kring_counts, kring_neighbors
+from .radius import default_radius, power_of_two_scale, typical_extent
+
+__all__ = ["edge_adjacency", "kring_neighbors", "kring_counts", "KringWork", "BallGrid",
+           "ball_grid", "spatial_order", "ball_neighbors", "ball_counts", "default_radius",
+           "power_of_two_scale", "typical_extent"]

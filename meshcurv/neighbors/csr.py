@@ -1,0 +1,67 @@
+"""The CSR streaming driver every neighbor search shares (compiled kernels).
+
+A search that lists each query's neighbors ``(indptr, indices)`` runs in three passes: a sample
+of 64 queries sizes a scratch buffer (:func:`stream_capacity`); each of the threads
+(:func:`thread_ranges`) streams its contiguous range of queries into its own slice of it; then
+:func:`gather_streams` turns the counts into ``indptr`` and copies every slice that fitted into
+``indices``. A thread whose slice overflowed (:func:`overflowed`) searches its range again
+straight into ``indices``. The searches themselves (k-ring, grid ball) live in
+:mod:`meshcurv.neighbors.kring` and :mod:`meshcurv.neighbors.grid`.
+"""
+
+import numpy as np
+from numba import njit, prange
+
+# Queries whose neighbor counts size the scratch buffer.
+SAMPLE = 64
+
+
+@njit(cache=True)
+def thread_ranges(m, nthreads):
+    """``(nthreads, per)``: threads to use for ``m`` queries (1 .. m) and queries per thread;
+    thread t takes queries ``t * per .. min(m, (t + 1) * per) - 1``."""
+    nthreads = max(1, min(m, nthreads))
+    return nthreads, (m + nthreads - 1) // nthreads
+
+
+@njit(cache=True)
+def sample_step(m):
+    """Stride of the sample queries ``range(0, m, step)`` (about :data:`SAMPLE` of them)."""
+    return max(1, m // SAMPLE)
+
+
+@njit(cache=True)
+def stream_capacity(total, count):
+    """Scratch entries per query: 1.5 times the mean of ``count`` sampled list lengths that sum
+    to ``total``, plus 16."""
+    return 16 + (3 * total) // (2 * max(count, 1))
+
+
+@njit(cache=True)
+def overflowed(used, t, per, cap):
+    """Whether thread ``t``'s stream of ``used[t]`` entries overflowed its slice."""
+    return used[t] > per * cap
+
+
+@njit(parallel=True, cache=True)
+def gather_streams(counts, buf, used, nthreads, per, cap):
+    """CSR ``indices`` from the threads' streams.
+
+    ``counts`` (m + 1,) int64 holds each query's list length at ``counts[q + 1]`` (and 0 at
+    ``counts[0]``); it becomes ``indptr`` in place. ``buf`` holds thread t's stream at
+    ``t * per * cap``, ``used[t]`` entries long. Returns (nnz,) int64 ``indices`` with every
+    stream that fitted copied in; the ranges of overflowed threads are left for the caller.
+    """
+    m = counts.shape[0] - 1
+    for i in range(m):
+        counts[i + 1] += counts[i]
+    indices = np.empty(counts[m], dtype=np.int64)
+    for t in prange(nthreads):
+        q0 = t * per
+        if q0 >= m or overflowed(used, t, per, cap):
+            continue
+        lo = t * per * cap
+        o = counts[q0]
+        for j in range(used[t]):
+            indices[o + j] = buf[lo + j]
+    return indices

@@ -15,7 +15,7 @@ from meshcurv.tiled import TileError, annotate_tiled, principal_curvatures_tiled
 
 # Every per-point field of CurvatureResult; the tiled run must reproduce all of them.
 FIELDS = ("k1", "k2", "d1", "d2", "normals", "valid", "n_neighbors", "n_samples", "residual",
-          "noise")
+          "noise", "status")
 
 
 def on(client):

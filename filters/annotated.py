@@ -17,8 +17,8 @@ from .attributes import has_attribute, store_point, store_scalar
 
 __all__ = ["save_curvature_mesh", "load_curvature_mesh"]
 
-# Scalar attributes carried between MeshSet and file, besides shape.FIELDS and valid; the filter
-# does not compute them, files written by meshcurv annotate have them.
+# Scalar attributes carried between MeshSet and file, besides shape.FIELDS, valid and status;
+# the filter does not compute them, files written by meshcurv annotate have them.
 _DIAGNOSTICS = {"n_neighbors": np.int32, "n_samples": np.int32, "residual": np.float64}
 
 
@@ -65,6 +65,8 @@ def save_curvature_mesh(ms, path):
     for f in shape.FIELDS:
         fields[f] = scalar(f)
     fields["valid"] = (scalar("valid") > 0).astype(np.uint8)
+    if has_attribute(scalar, "status"):  # meshes filtered by earlier versions have none
+        fields["status"] = scalar("status").astype(np.uint8)
     for name in ("d1", "d2"):
         values = point(name)
         for i, c in enumerate("xyz"):
@@ -110,7 +112,7 @@ def load_curvature_mesh(ms, path):
     if n != len(data.vertices):
         raise ValueError(f"load_curvature_mesh: {path}: MeshLab read {n} vertices, the file "
                          f"has {len(data.vertices)}")
-    for f in shape.FIELDS + ("valid",) + tuple(_DIAGNOSTICS):
+    for f in shape.FIELDS + ("valid", "status") + tuple(_DIAGNOSTICS):
         if f in data.fields:
             store_scalar(ms, f, np.asarray(data.fields[f], dtype=np.float64))
     for name in ("d1", "d2"):

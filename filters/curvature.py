@@ -195,6 +195,7 @@ def _store_result(ms, res, fields, quality, cmap, clamp):
     for name, values in fields.items():
         store_scalar(ms, name, values)
     store_scalar(ms, "valid", res.valid.astype(np.float64))
+    store_scalar(ms, "status", res.status.astype(np.float64))
     store_point(ms, "d1", res.d1)
     store_point(ms, "d2", res.d2)
     # quality: NaN would break MeshLab's ramps and statistics, so invalid vertices read 0

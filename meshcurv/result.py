@@ -12,7 +12,7 @@ from .fit import constants
 __all__ = ["CurvatureResult", "Status", "CURVATURE_FIELDS", "curvature_fields"]
 
 # Per-vertex curvature fields of every annotated file (PLY properties, LAS extra bytes).
-CURVATURE_FIELDS = shape.FIELDS + ("valid", "d1x", "d1y", "d1z", "d2x", "d2y", "d2z")
+CURVATURE_FIELDS = shape.FIELDS + ("valid", "status", "d1x", "d1y", "d1z", "d2x", "d2y", "d2z")
 
 
 class Status(IntEnum):
@@ -104,10 +104,11 @@ class CurvatureResult:
 
 def curvature_fields(result):
     """The :data:`CURVATURE_FIELDS` of a :class:`~meshcurv.CurvatureResult`, in that order, as
-    ``{name: (n,) array}``: float64, ``valid`` uint8 (1 = estimated), ``d1x .. d2z`` the
-    components of the principal directions."""
+    ``{name: (n,) array}``: float64, ``valid`` uint8 (1 = estimated), ``status`` uint8
+    (:class:`Status`), ``d1x .. d2z`` the components of the principal directions."""
     out = {f: np.asarray(getattr(result, f), dtype=np.float64) for f in shape.FIELDS}
     out["valid"] = np.asarray(result.valid, dtype=np.uint8)
+    out["status"] = np.asarray(result.status, dtype=np.uint8)
     for name in ("d1", "d2"):
         arr = getattr(result, name)
         for a, c in enumerate("xyz"):

@@ -146,6 +146,17 @@ def test_nan_rows_are_reported_and_get_no_estimate(tmp_path, capsys, inputs):
     assert len(back.vertices) == len(table)  # the row is kept, in place
     assert back.fields["valid"][7] == 0 and np.isnan(back.fields["k1"][7])
     assert back.fields["valid"].sum() > 0.95 * len(table)
+    # the reason is written beside it, and info counts the rows by reason
+    from meshcurv.result import Status
+
+    status = back.fields["status"]
+    assert status[7] == Status.NO_POSITION
+    assert ((status == Status.OK) == (back.fields["valid"] == 1)).all()
+    code, out, _ = run(capsys, "info", tmp_path / "holes.ply")
+    assert code == 0 and "NO_POSITION" in out
+    line = next(x for x in out.splitlines() if x.startswith("no estimate: "))
+    assert sum(int(p.split()[0]) for p in line[len("no estimate: "):].split(", ")) == (
+        (status != Status.OK).sum())
 
 
 BAD = {

@@ -3,6 +3,7 @@
 import numpy as np
 
 from .. import io, shape
+from ..result import Status
 
 __all__ = ["info_text"]
 
@@ -21,6 +22,8 @@ def info_text(path):
     valid = (np.asarray(data.fields["valid"]).astype(bool) if "valid" in data.fields
              else np.isfinite(data.fields["k1"]))
     lines.append(f"valid: {int(valid.sum())} of {n} ({100.0 * valid.mean():.1f} %)")
+    if "status" in data.fields and not valid.all():
+        lines.append("no estimate: " + _status_counts(data.fields["status"]))
     header = f"{'field':<12}{'min':>12}{'p2':>12}{'median':>12}{'p98':>12}{'max':>12}{'mean':>12}"
     lines.append(header)
     for name in shape.FIELDS:
@@ -40,3 +43,13 @@ def info_text(path):
                          f"min {nb.min()}, max {nb.max()}")
     return "\n".join(lines)
 
+
+
+def _status_counts(status):
+    """``"12 TOO_FEW_HALF_SETS, 3 NO_POSITION"``: the rows without an estimate by reason, most
+    frequent first (codes this version does not know are counted as ``status N``)."""
+    codes, counts = np.unique(np.asarray(status, dtype=np.int64), return_counts=True)
+    known = {int(s): s.name for s in Status}
+    parts = [(c, known.get(int(k), f"status {int(k)}")) for k, c in zip(codes, counts)
+             if int(k) != Status.OK]
+    return ", ".join(f"{c} {name}" for c, name in sorted(parts, key=lambda p: -p[0]))

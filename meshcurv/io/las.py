@@ -20,6 +20,7 @@ mean, gaussian        float64  (k1 + k2) / 2 and k1 * k2
 shape_index           float64  in [-1, 1], +1 for a convex cap
 curvedness            float64  sqrt((k1^2 + k2^2) / 2)
 valid                 uint8    1 where an estimate was possible, else 0 (curvatures are NaN)
+status                uint8    why there is no estimate: meshcurv.result.Status (0 = OK)
 d1x d1y d1z           float64  unit direction of k1 (model axes)
 d2x d2y d2z           float64  unit direction of k2; (d1, d2, normal) is right-handed
 NormalX..NormalZ      float64  the unit normal used, only when it was estimated
@@ -58,8 +59,10 @@ _DESCRIPTIONS = {
     "k1": "max principal curvature", "k2": "min principal curvature",
     "mean": "mean curvature", "gaussian": "Gaussian curvature",
     "shape_index": "shape index, +1 convex cap", "curvedness": "curvedness",
-    "valid": "1 if curvature estimated",
+    "valid": "1 if curvature estimated", "status": "why no estimate (0 = estimated)",
 }
+# Fields written as uint8 whatever the float type of the others.
+_INTEGER_FIELDS = ("valid", "status")
 # Names under which other tools store normals (PDAL, CloudCompare, ad-hoc scripts).
 _NORMAL_NAMES = (("normalx", "normaly", "normalz"), ("normal_x", "normal_y", "normal_z"),
                  ("nx", "ny", "nz"))
@@ -269,12 +272,13 @@ def result_fields(result, normals=False, float_type="f8"):
     if normals:
         for a, name in enumerate(NORMAL_FIELDS):
             out[name] = result.normals[:, a]
-    return {k: (v if k == "valid" else np.asarray(v, dtype=ft)) for k, v in out.items()}
+    return {k: (v if k in _INTEGER_FIELDS else np.asarray(v, dtype=ft)) for k, v in out.items()}
 
 
 def _field_types(names, float_type):
-    """``[(name, dtype)]`` of the new dimensions: uint8 for ``valid``, ``float_type`` else."""
-    return [(n, np.uint8 if n == "valid" else np.dtype(float_type)) for n in names]
+    """``[(name, dtype)]`` of the new dimensions: uint8 for ``valid`` and ``status``,
+    ``float_type`` else."""
+    return [(n, np.uint8 if n in _INTEGER_FIELDS else np.dtype(float_type)) for n in names]
 
 
 def check_paths(in_path, out_path):

@@ -3,7 +3,7 @@ and the curvature-annotated PLY.
 
 The annotated PLY (:func:`write_annotated`) is binary little-endian with named vertex
 properties: ``x y z nx ny nz`` (float64); the fields ``k1 k2 mean gaussian shape_index
-curvedness`` (float64, NaN where invalid), ``valid`` (uint8), ``d1x d1y d1z d2x d2y d2z``
+curvedness`` (float64, NaN where invalid), ``valid`` and ``status`` (uint8), ``d1x d1y d1z d2x d2y d2z``
 (float64), ``n_neighbors n_samples`` (int32) and ``residual`` (float64), each named
 ``scalar_<field>`` in the file (``scalar_k1``: CloudCompare's spelling, the only one it loads as
 a scalar field); then ``quality`` (float64, the chosen field with 0 where invalid) and

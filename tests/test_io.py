@@ -3,7 +3,6 @@ registered, writes are atomic, bad files fail with the file name, the format mod
 neither the dispatcher nor their soft dependencies; meshcurv.shape colour maps."""
 
 import ast
-import doctest
 import os
 import pathlib
 import subprocess
@@ -13,7 +12,7 @@ import numpy as np
 import pytest
 
 from meshcurv import io, shape
-from meshcurv.io import atomic, data, las, obj, off, parse, ply, stl, xyz
+from meshcurv.io import las, obj, off, ply, stl, xyz
 
 FORMATS = (ply, obj, off, stl, xyz, las)
 IO_DIR = pathlib.Path(io.__file__).parent
@@ -132,13 +131,6 @@ def test_las_files_without_laspy_fail_at_use_with_the_install_hint(tmp_path):
     out = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True,
                          text=True, check=True).stdout
     assert out.strip() == f"{path}: LAS/LAZ files need laspy and lazrs (pip install 'meshcurv[las]')"
-
-
-@pytest.mark.parametrize("module", [io, data, atomic, parse, *FORMATS],
-                         ids=lambda m: m.__name__)
-def test_docstring_examples_run(module):
-    result = doctest.testmod(module, optionflags=doctest.ELLIPSIS)
-    assert result.failed == 0
 
 
 def test_check_distinct_refuses_the_input_under_another_name(tmp_path):

@@ -17,12 +17,13 @@ compiled kernels with their numpy specifications in :mod:`meshcurv.neighbors`,
 
 import importlib
 
-__all__ = ["CurvatureResult", "principal_curvatures", "estimate_normals", "default_radius"]
+__all__ = ["CurvatureResult", "Options", "principal_curvatures", "estimate_normals",
+           "default_radius"]
 __version__ = "0.1.0"
 
 # The names above and the submodule ``surfaces`` load on first use (PEP 562), so that
 # ``meshcurv --help`` and ``meshcurv info`` do not import numba, scipy and trimesh.
-_LAZY = {"CurvatureResult": "result", "principal_curvatures": "api",
+_LAZY = {"CurvatureResult": "result", "Options": "options", "principal_curvatures": "api",
          "estimate_normals": "api", "default_radius": "neighbors",
          "surfaces": None}
 

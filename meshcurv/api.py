@@ -9,7 +9,7 @@ from . import pipeline
 from .autoradius import auto_radius
 from .inputs import as_arrays
 from .neighbors import default_radius, power_of_two_scale
-from .options import resolve_plan
+from .options import Options, resolve_plan
 from .result import Status
 
 __all__ = ["principal_curvatures", "estimate_normals", "no_estimate_reason"]
@@ -107,7 +107,7 @@ def no_estimate_reason(result, n_points, option="radius"):
             f"or coincident); try another {option}")
 
 
-def _resolve_radius(radius, v, f, given_normals, options):
+def _resolve_radius(radius, v, f, given_normals, settings):
     """The radius in model units: given, the default from the sampling (None) or the one
     :func:`meshcurv.autoradius.auto_radius` chooses ("auto", with this call's options)."""
     finite = v[np.isfinite(v).all(axis=1)]
@@ -116,7 +116,7 @@ def _resolve_radius(radius, v, f, given_normals, options):
             radius = float(default_radius(v))
         elif radius == "auto":
             # pilot runs with this call's options; min_points is auto_radius' own smallest ball
-            pilot = {k: val for k, val in options.items() if k != "min_points"}
+            pilot = {k: val for k, val in settings.items() if k != "min_points"}
             radius = float(auto_radius(v, f, normals=given_normals, **pilot))
         else:
             raise ValueError(f"radius must be a number of model units, None or 'auto', "
@@ -150,12 +150,8 @@ def _run_rescaled(v, f, given_normals, radius, query, plan, progress, scale):
 
 
 def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_directions=8,
-                         neighborhood="auto", *, slab=0.25, min_points=3, min_spread=0.25,
-                         weighting="auto", circle_normalization="tangent",
-                         section_blend=True, robust=True,
-                         half_frequency=False, normal_estimation="auto", refine_normals=None,
-                         orientation="mst",
-                         query=None, progress=False):
+                         neighborhood="auto", *, options=None, query=None, progress=False,
+                         **switches):
     """Principal curvatures by CGA circle fits in normal sections (Seibert et al.).
 
     At every vertex x: the neighbors within ``radius`` are split by ``n_directions`` planes
@@ -173,7 +169,7 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
         face-based normal orientation.
     normals : (n, 3) float, optional
         Outward normals, used as given (normalised). Default: estimated, see
-        ``normal_estimation``.
+        ``Options.normal_estimation``.
     radius : float or "auto", optional
         Neighborhood radius, model units. Default: the radius whose ball holds about 100
         points (:func:`meshcurv.neighbors.default_radius`; ~5 mean edge lengths).
@@ -186,55 +182,13 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
         "kring": vertices reachable over mesh edges without leaving the ball (needs faces;
         never leaks across thin sheets). "ball": all points within ``radius``. "auto": kring
         when faces are given, else ball.
-    slab : float, default 0.25
-        Half-width of each plane's slab, as a fraction of ``radius``. Wider slabs use more
-        points (less noise) at the price of a blend of directions, which ``section_blend``
-        models.
-    min_points : int, default 3
-        Fewest neighbors (besides x) a half-set needs to be fitted.
-    min_spread : float, default 0.25
-        Fewest fraction of ``radius`` the farthest point of a half-set must reach along its
-        direction; rejects one-sided stubs near borders and holes.
-    weighting : {"auto", "distance", "none"}
-        Weights of the points in each circle fit. "distance": ``(1 - r^2 / radius^2)^4``,
-        which favours near points: where the curvature varies inside the ball it halves the
-        error of equal weights (Table 2 paraboloid, radius 2: mean |dk1| 0.0015 vs 0.0030).
-        "none": equal weights, about a third of the noise-induced error. "auto" (default): per
-        vertex, distance weights where the local cubic fit leaves no noise and equal weights
-        where it does, mixed smoothly (:func:`meshcurv.pipeline.weight_blend`).
-    circle_normalization : {"tangent", "unit"}
-        Normalisation of the CGA sphere vector t in each circle fit. "unit": |t| = 1, the
-        smallest eigenvector of the 3x3 matrix (the paper). "tangent" (default): t1 = 1, the
-        same eigenproblem with normalisation matrix diag(1, 0, 0); identical on exact data, but
-        it cannot drift to spheres centred at x, whose curvature is unbounded - with noise of
-        15 % of the radius the unit form has a 6x wider spread and 1000x outliers.
-    section_blend : bool, default True
-        Fit the Euler model to the direction mix each half-set really measured (from its own
-        points) instead of the plane's nominal angle. Removes the slab's blurring of k1 - k2.
-    robust : bool, default True
-        Drop circle fits further than 3 robust sigmas from the Euler model and refit.
-    half_frequency : bool, default False
-        Add ``cos theta, sin theta`` terms (the paper's half-frequency fit, linear form) to
-        absorb differences between opposite directions.
-    normal_estimation : {"auto", "faces", "pca"}
-        Used when ``normals`` is None. "faces": area-weighted face normals. "pca": normal of
-        the least-squares plane through the same neighborhood, oriented by the faces if there
-        are any, else by ``orientation``. "auto" (default): "pca" - on noisy meshes face normals
-        are the worst choice (0.3 % noise, random sphere: mean |dk1| + |dk2| 0.60 with face
-        normals, 0.38 with PCA ones; max |dk1| 13 vs 0.9), on clean ones the refinement below
-        makes the two equal.
-    refine_normals : bool or None, default None
-        Refine the normals by a local quadric fit over the same neighborhood before the
-        circle fits (:func:`meshcurv.fit.jet.local_jet`), mixed with the starting normal by
-        the measured noise (the mix of ``weighting="auto"``,
-        :func:`meshcurv.pipeline.weight_blend`, whatever ``weighting`` is): face and PCA normals
-        tilt with irregular sampling (0.7 degrees on a random sphere, up to 3 % in
-        curvature), the quadric's normal does not but is noisier. None: refine estimated
-        normals, use given ones as they are; True: refine given normals too; False: never.
-    orientation : "mst" or (3,) array-like
-        Global orientation of estimated point-cloud normals: "mst" propagates along a minimum
-        spanning tree and then turns each connected piece away from its own centroid; a (3,)
-        point orients every normal towards it (a scanner position).
+    options : Options, optional
+        The estimator's research switches (slab, weights, normalisation, robust refit,
+        normal estimation and refinement, orientation of cloud normals), documented in
+        :class:`meshcurv.Options`; default ``Options()``.
+    **switches
+        Any field of :class:`meshcurv.Options` by name, overriding ``options`` (e.g.
+        ``weighting="none"``, ``orientation=(0, 0, 100)``).
     query : (q,) int, optional
         Estimate only at these vertex indices (neighbors still come from all vertices); the
         result then has q rows in this order.
@@ -244,7 +198,7 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
     Returns
     -------
     CurvatureResult
-        ``k1, k2, d1, d2, normals, valid, mean, gaussian, shape_index, curvedness``, the
+        ``k1, k2, d1, d2, normals, valid, status, mean, gaussian, shape_index, curvedness``, the
         diagnostics ``n_neighbors, n_samples, residual, noise`` (one row per vertex, or per
         query) and the ``radius`` used.
 
@@ -262,17 +216,13 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
     True
     """
     v, f, given_normals = as_arrays(vertices, faces, normals)
-    options = dict(n_directions=n_directions, neighborhood=neighborhood, slab=slab,
-                   min_points=min_points, min_spread=min_spread, weighting=weighting,
-                   circle_normalization=circle_normalization, section_blend=section_blend,
-                   robust=robust, half_frequency=half_frequency,
-                   normal_estimation=normal_estimation, refine_normals=refine_normals,
-                   orientation=orientation)
-    plan = resolve_plan(f is not None, given_normals is not None, **options)
+    settings = dict(n_directions=n_directions, neighborhood=neighborhood,
+                    **Options.merged(options, switches).as_dict())
+    plan = resolve_plan(f is not None, given_normals is not None, **settings)
     query = _check_query(query, len(v))
     if plan.viewpoint is not None:
-        options["orientation"] = plan.viewpoint
-    radius = _resolve_radius(radius, v, f, given_normals, options)
+        settings["orientation"] = plan.viewpoint
+    radius = _resolve_radius(radius, v, f, given_normals, settings)
     scale = power_of_two_scale(radius)
     if scale != 1.0:
         return _run_rescaled(v, f, given_normals, radius, query, plan, progress, scale)

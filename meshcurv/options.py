@@ -4,17 +4,21 @@ The API, the command line, the pymeshlab filter and tiled runs check options her
 work starts (and without loading the compiled kernels).
 """
 
+from dataclasses import dataclass, fields, replace
 from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["OPTION_NAMES", "CHOICES", "MAX_DIRECTIONS", "check_options", "Plan", "resolve_plan"]
+__all__ = ["Options", "OPTION_NAMES", "CHOICES", "MAX_DIRECTIONS", "check_options", "Plan",
+           "resolve_plan"]
 
-# Keyword options of principal_curvatures besides the data (vertices, faces, normals) and the
-# call's own switches (query, progress); tests hold this table to the function's signature.
-OPTION_NAMES = ("radius", "n_directions", "neighborhood", "slab", "min_points", "min_spread",
-                "weighting", "circle_normalization", "section_blend", "robust",
-                "half_frequency", "normal_estimation", "refine_normals", "orientation")
+# Research switches of the estimator: the fields of Options, in order.
+SWITCH_NAMES = ("slab", "min_points", "min_spread", "weighting", "circle_normalization",
+                "section_blend", "robust", "half_frequency", "normal_estimation",
+                "refine_normals", "orientation")
+# Every option of principal_curvatures besides the data (vertices, faces, normals) and the
+# call's own arguments (options, query, progress): its three public knobs and the switches.
+OPTION_NAMES = ("radius", "n_directions", "neighborhood") + SWITCH_NAMES
 
 # Options that take one of a few names.
 CHOICES = {"neighborhood": ("auto", "kring", "ball"),
@@ -69,6 +73,113 @@ def check_options(**options):
         raise ValueError(f"orientation must be 'mst' or a finite (3,) viewpoint, "
                          f"got {options['orientation']!r}")
     return orientation
+
+
+@dataclass(frozen=True)
+class Options:
+    """The research switches of :func:`meshcurv.principal_curvatures`, checked when made.
+
+    The defaults are the estimator's; change one with ``Options(weighting="none")`` or
+    ``options.replace(robust=False)``, or pass it by name to ``principal_curvatures``.
+
+    Parameters
+    ----------
+    slab : float, default 0.25
+        Half-width of each plane's slab, as a fraction of ``radius``. Wider slabs use more
+        points (less noise) at the price of a blend of directions, which ``section_blend``
+        models.
+    min_points : int, default 3
+        Fewest neighbors (besides x) a half-set needs to be fitted.
+    min_spread : float, default 0.25
+        Fewest fraction of ``radius`` the farthest point of a half-set must reach along its
+        direction; rejects one-sided stubs near borders and holes.
+    weighting : {"auto", "distance", "none"}
+        Weights of the points in each circle fit. "distance": ``(1 - r^2 / radius^2)^4``,
+        which favours near points: where the curvature varies inside the ball it halves the
+        error of equal weights (Table 2 paraboloid, radius 2: mean |dk1| 0.0015 vs 0.0030).
+        "none": equal weights, about a third of the noise-induced error. "auto" (default): per
+        vertex, distance weights where the local cubic fit leaves no noise and equal weights
+        where it does, mixed smoothly (:func:`meshcurv.pipeline.weight_blend`).
+    circle_normalization : {"tangent", "unit"}
+        Normalisation of the CGA sphere vector t in each circle fit. "unit": |t| = 1, the
+        smallest eigenvector of the 3x3 matrix (the paper). "tangent" (default): t1 = 1, the
+        same eigenproblem with normalisation matrix diag(1, 0, 0); identical on exact data, but
+        it cannot drift to spheres centred at x, whose curvature is unbounded - with noise of
+        15 % of the radius the unit form has a 6x wider spread and 1000x outliers.
+    section_blend : bool, default True
+        Fit the Euler model to the direction mix each half-set really measured (from its own
+        points) instead of the plane's nominal angle. Removes the slab's blurring of k1 - k2.
+    robust : bool, default True
+        Drop circle fits further than 3 robust sigmas from the Euler model and refit.
+    half_frequency : bool, default False
+        Add ``cos theta, sin theta`` terms (the paper's half-frequency fit, linear form) to
+        absorb differences between opposite directions.
+    normal_estimation : {"auto", "faces", "pca"}
+        Used when ``normals`` is None. "faces": area-weighted face normals. "pca": normal of
+        the least-squares plane through the same neighborhood, oriented by the faces if there
+        are any, else by ``orientation``. "auto" (default): "pca" - on noisy meshes face normals
+        are the worst choice (0.3 % noise, random sphere: mean |dk1| + |dk2| 0.60 with face
+        normals, 0.38 with PCA ones; max |dk1| 13 vs 0.9), on clean ones the refinement below
+        makes the two equal.
+    refine_normals : bool or None, default None
+        Refine the normals by a local quadric fit over the same neighborhood before the
+        circle fits (:func:`meshcurv.fit.jet.local_jet`), mixed with the starting normal by
+        the measured noise (the mix of ``weighting="auto"``,
+        :func:`meshcurv.pipeline.weight_blend`, whatever ``weighting`` is): face and PCA normals
+        tilt with irregular sampling (0.7 degrees on a random sphere, up to 3 % in
+        curvature), the quadric's normal does not but is noisier. None: refine estimated
+        normals, use given ones as they are; True: refine given normals too; False: never.
+    orientation : "mst" or (3,) array-like
+        Global orientation of estimated point-cloud normals: "mst" propagates along a minimum
+        spanning tree and then turns each connected piece away from its own centroid; a (3,)
+        point orients every normal towards it (a scanner position).
+
+    Examples
+    --------
+    >>> Options(weighting="none").replace(robust=False).robust
+    False
+    >>> Options(slab=0.3, weighting="gauss")
+    Traceback (most recent call last):
+    ...
+    ValueError: weighting must be one of 'auto', 'distance', 'none', got 'gauss'
+    """
+
+    slab: float = 0.25
+    min_points: int = 3
+    min_spread: float = 0.25
+    weighting: str = "auto"
+    circle_normalization: str = "tangent"
+    section_blend: bool = True
+    robust: bool = True
+    half_frequency: bool = False
+    normal_estimation: str = "auto"
+    refine_normals: object = None
+    orientation: object = "mst"
+
+    def __post_init__(self):
+        check_options(**self.as_dict())
+
+    def as_dict(self):
+        """``{name: value}`` of every switch, in field order."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    def replace(self, **switches):
+        """A copy with these switches changed (ValueError for an unknown name or value)."""
+        check_options(**switches)
+        unknown = sorted(set(switches) - set(SWITCH_NAMES))
+        if unknown:
+            raise ValueError(f"{', '.join(unknown)} is not a switch of Options (known: "
+                             f"{', '.join(SWITCH_NAMES)})")
+        return replace(self, **switches)
+
+    @classmethod
+    def merged(cls, options=None, switches=None):
+        """``options`` (default ``Options()``) with ``switches`` ({name: value}) applied."""
+        if options is None:
+            options = cls()
+        elif not isinstance(options, cls):
+            raise ValueError(f"options must be a meshcurv.Options, got {type(options).__name__}")
+        return options.replace(**switches) if switches else options
 
 
 class Plan(NamedTuple):

@@ -201,7 +201,22 @@ def _stderr_lines(text):
     return [ln for ln in text.splitlines() if ln.strip() and "compiling the numba" not in ln]
 
 
-def test_failing_tile_task_is_one_line_naming_the_tile(tmp_path):
+@pytest.fixture
+def dashboard_port_taken():
+    """Port 8787 (Dask's default dashboard) held, as by another cluster on the machine."""
+    import socket
+
+    sock = socket.socket()
+    try:
+        sock.bind(("", 8787))
+        sock.listen()
+    except OSError:
+        pass  # already taken by someone else: the same situation
+    yield
+    sock.close()
+
+
+def test_failing_tile_task_is_one_line_naming_the_tile(tmp_path, dashboard_port_taken):
     from meshcurv.tiled import annotate_tiled
 
     src, out = str(tmp_path / "scan.las"), str(tmp_path / "scan_curv.las")

@@ -58,8 +58,10 @@ def dask_client(scheduler, n_workers, threads_per_task=None):
     cluster = None
     try:
         with _workers_ignore_sigint():
+            # the scheduler's HTTP server on a free port: with None it still takes 8787 and
+            # warns ("Port 8787 is already in use") when another cluster holds it
             cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
-                                   dashboard_address=None)
+                                   dashboard_address=":0")
         with Client(cluster) as client:
             client.run(_quiet_worker)
             yield client, threads_per_task or max(1, (os.cpu_count() or 1) // n_workers)

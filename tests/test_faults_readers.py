@@ -570,6 +570,22 @@ def test_a_las_header_declaring_billions_of_points_allocates_little(tmp_path):
     assert peak < MEMORY_LIMIT
 
 
+@pytest.mark.skipif(not _has_las(), reason="laspy and lazrs are not installed")
+@pytest.mark.parametrize("compressed", [False, True], ids=["las", "laz"])
+def test_a_las_header_declaring_millions_of_records_allocates_little(tmp_path, compressed):
+    content = bytearray(_las(compressed))
+    content[100:104] = np.uint32(12_000_000).tobytes()  # number of variable-length records
+    path = _write(tmp_path, "vlrs.laz" if compressed else "vlrs.las", bytes(content))
+    tracemalloc.start()
+    try:
+        with pytest.raises(io.MeshFileError, match="variable-length records"):
+            io.read(path)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < MEMORY_LIMIT
+
+
 # ----------------------------------------------------------- CLI: one line, exit code 1
 
 def test_cli_reports_corrupt_files_in_one_line(tmp_path):

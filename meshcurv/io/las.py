@@ -78,18 +78,40 @@ def _is_las(path):
     return str(path).lower().endswith((".las", ".laz"))
 
 
+# Bytes of a variable-length record's header (LAS 1.0-1.4): each of the header's declared VLRs
+# takes at least this much between the public header and the first point.
+_VLR_HEADER_SIZE = 54
+
+
+def _check_vlr_count(path):
+    """Refuse a header whose count of variable-length records cannot fit before its points
+    (laspy allocates every declared record before reading any: 1.3 GB for a corrupt count)."""
+    with open(path, "rb") as fh:
+        head = fh.read(104)
+    if len(head) < 104 or head[:4] != b"LASF":
+        return  # laspy says what is wrong
+    header_size = int.from_bytes(head[94:96], "little")
+    point_offset = int.from_bytes(head[96:100], "little")
+    n_vlrs = int.from_bytes(head[100:104], "little")
+    if header_size + n_vlrs * _VLR_HEADER_SIZE > point_offset:
+        raise LasReadError(f"{path}: the header declares {n_vlrs} variable-length records, more "
+                           f"than fit before its point data at byte {point_offset} (corrupt "
+                           "header)")
+
+
 def open_las(path):
     """A laspy reader of the LAS/LAZ file ``path`` (a context manager), its header checked
     against the file size when the points are not compressed.
 
     Raises ValueError when ``path`` is not .las/.laz, FileNotFoundError when it is missing,
     :class:`LasReadError` when laspy cannot read its header or the header declares more
-    points than the file holds.
+    points or variable-length records than the file holds.
     """
     import laspy
 
     if not _is_las(path):
         raise ValueError(f"{path}: expected a .las or .laz file")
+    _check_vlr_count(path)
     try:
         reader = laspy.open(os.fspath(path))
     except FileNotFoundError:

@@ -85,7 +85,7 @@ def file_extension(path):
 def quiet_libraries():
     """Silence warnings and the loggers of the parsing libraries while a file is read: their
     complaints about a corrupt file become the reader's one-line MeshFileError instead."""
-    loggers = [logging.getLogger(name) for name in ("trimesh", "plyfile", "laspy")]
+    loggers = [logging.getLogger(name) for name in ("plyfile", "laspy")]
     levels = [lg.level for lg in loggers]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

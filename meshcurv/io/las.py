@@ -75,7 +75,7 @@ class LasReadError(OSError):
 
 def _is_las(path):
     """Whether ``path`` ends in .las or .laz (any case)."""
-    return str(path).lower().endswith((".las", ".laz"))
+    return file_extension(path) in (".las", ".laz")
 
 
 # Bytes of a variable-length record's header (LAS 1.0-1.4): each of the header's declared VLRs
@@ -349,7 +349,7 @@ def annotate_las(in_path, out_path, fields_for, names, chunk_size=DEFAULT_CHUNK,
     def write(tmp):
         with open(tmp, "wb") as fh, laspy.open(
                 fh, mode="w", header=header, closefd=False,
-                do_compress=str(out_path).lower().endswith(".laz")) as writer:
+                do_compress=file_extension(out_path) == ".laz") as writer:
             for first, _, _, rec in iter_las_chunks(in_path, chunk_size, with_records=True):
                 out = laspy.ScaleAwarePointRecord.zeros(len(rec), header=header)
                 for name in rec.array.dtype.names:  # raw values: the input's dims, bit for bit
@@ -419,7 +419,7 @@ def write_las(path, data, result, quality=None, colormap=None, clamp=None):
     :func:`write_las_curvature`). ``.laz`` output is compressed. LAS has no colour ramp or
     quality property, so ``quality``, ``colormap`` and ``clamp`` are accepted and ignored.
     """
-    if file_extension(data.path) not in (".las", ".laz"):
+    if not _is_las(data.path):
         raise MeshFileError(f"{path}: LAS/LAZ output adds fields to the points of a LAS/LAZ "
                             f"input, but the input is {data.path or 'in memory'}; write .ply")
     check_distinct(data.path, path)

@@ -128,8 +128,8 @@ def _read_checked(path):
                                  f"or corrupt header)")
             room -= need
         if text:  # one line per element record; plyfile stops after the declared counts
-            data = fh.read().replace(b"\r\n", b"\n").replace(b"\r", b"\n").strip()
-            beyond = (data.count(b"\n") + 1 if data else 0) > sum(e[1] for e in elements)
+            # bytes.splitlines splits at \n, \r\n and \r: one entry per record line
+            beyond = len(fh.read().strip().splitlines()) > sum(e[1] for e in elements)
         fh.seek(0)
         ply = PlyData.read(fh)
         if not text:  # plyfile leaves a binary file at the end of the declared data
@@ -155,9 +155,7 @@ def _vertex_arrays(vert):
     field_names = ply_field_names(props)
     # copies: the file is memory-mapped and closed now
     fields = {field_names[p]: np.array(vert[p]) for p in props
-              if p not in _GEOMETRY and p not in _COLOR}
-    if any(f.dtype == object for f in fields.values()):
-        fields = {p: f for p, f in fields.items() if f.dtype != object}  # list properties
+              if p not in _GEOMETRY and p not in _COLOR and vert[p].dtype != object}  # no lists
     return vertices, normals, fields
 
 

@@ -205,8 +205,9 @@ class WorkerPool:
 
 
 def _one_line(exc):
-    text = str(exc).strip()
-    return f"{type(exc).__name__}: {text.splitlines()[0]}" if text else type(exc).__name__
+    """``"TypeName: first line of the message"`` (the type name alone when there is none)."""
+    text = io.first_line(exc)
+    return text if text == type(exc).__name__ else f"{type(exc).__name__}: {text}"
 
 
 # ------------------------------------------------------------------------------ worker side
@@ -293,7 +294,7 @@ def run_one(input_path, output_path, options):
     except (ValueError, OSError) as exc:       # io.MeshFileError is a ValueError
         message = io.first_line(exc)
     except Exception as exc:  # a bug, but one bad file must not stop a batch
-        message = f"{type(exc).__name__}: {io.first_line(exc)}"
+        message = _one_line(exc)
     return {"input": input_path, "output": output_path, "status": "failed", "error": message}
 
 
@@ -463,7 +464,7 @@ def failure_text(res):
 
 def _worker_failure(k, inputs, outputs, exc):
     return {"input": inputs[k], "output": outputs[k], "status": "failed",
-            "error": f"worker failed: {type(exc).__name__}: {io.first_line(exc)}"}
+            "error": f"worker failed: {_one_line(exc)}"}
 
 
 def _batch_pool(inputs, outputs, options, todo, record, jobs=1):

@@ -12,7 +12,7 @@ from .constants import WEIGHT_POWER
 # Columns of the per-half-set accumulator (coordinates scaled by 1/radius). The CGA circle fit
 # needs B = sum w w^T over rows w = (h, -1, -r2/2): the weighted sums of 1, h, h^2, r2, h*r2,
 # r2^2. The sums of r2*cos2phi ... tell the sine fit which blend of directions a half-set really
-# saw (see ``_sample_design``). _CNT counts the points, _EMAX is the farthest reach along the
+# saw (see ``sample_design``). _CNT counts the points, _EMAX is the farthest reach along the
 # plane's direction.
 _N, _H, _HH, _R, _HR, _RR, _RC, _RRC, _RS, _RRS, _CNT, _EMAX = range(12)
 

@@ -11,16 +11,17 @@ PLANE_OFFSET = 0.25
 
 
 # Fewest spread of the directions the circle fits measured for an estimate: the smaller
-# eigenvalue of the covariance of their (cos 2phi, sin 2phi) mixes (see ``_sample_design``)
-# over the samples kept. Measured: directions all around ~0.34 (sphere), mesh borders and
+# eigenvalue of the covariance of their (cos 2phi, sin 2phi) mixes over the samples kept
+# (:func:`meshcurv.fit.euler.direction_spread`; the mixes from
+# :func:`meshcurv.fit.circle.sample_design`). Measured: directions all around ~0.34 (sphere), mesh borders and
 # corners >= 0.15, the border of a random half-sphere cloud >= 0.027, the corners of a random
 # square patch 0.0069 .. 0.0095 (still accurate); neighbors along one curve (the rim of a
 # triangle fan) 0 .. 0.0018: there the Euler model's B and C are not determined, and k1, k2
 # would be noise (often exactly 0) marked valid.
 MIN_DIRECTION_SPREAD = 3e-3
 
-# Why a vertex has no estimate: the kernel's codes of :class:`meshcurv.result.Status` (int8),
-# one per early return (documented there).
+# Why a vertex has no estimate: the codes of :class:`meshcurv.result.Status` (int8, documented
+# there), set by the fused kernel (OUT_OF_RANGE by meshcurv.api after a rescaled run).
 STATUS_OK = 0
 STATUS_NO_POSITION = 1
 STATUS_NO_NORMAL = 2

@@ -10,7 +10,7 @@ linear least-squares problem (the paper's phase formula is wrong; this form need
 
 import numpy as np
 
-__all__ = ["euler_design", "fit_euler"]
+__all__ = ["euler_design", "fit_euler", "direction_spread"]
 
 
 def euler_design(theta, half_frequency=False):
@@ -75,3 +75,9 @@ def fit_euler(design, kappa, robust=False):
     amp = np.hypot(sol[1], sol[2])
     rms = np.sqrt(np.mean((kappa[used] - design[used] @ sol) ** 2))
     return float(sol[0] + amp), float(sol[0] - amp), float(0.5 * np.arctan2(sol[2], sol[1])), float(rms), used
+
+
+def direction_spread(mix):
+    """Spread of the measured directions: the smaller eigenvalue of the covariance of the
+    (k, 2) (cos 2phi, sin 2phi) mixes of the circle fits kept (0 when they lie on a line)."""
+    return np.linalg.eigvalsh(np.cov(np.asarray(mix).T, bias=True))[0]

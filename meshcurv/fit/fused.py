@@ -64,9 +64,9 @@ def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, wo
     npar = 5 if half_frequency else 3
     if not robust_euler_fit(rows, kappa, active, m, npar, robust, mat, rhs, sol, scratch):
         return np.nan, np.nan, np.nan, m, np.nan, n_nbr, STATUS_ILL_POSED_FIT
-    used, sse = euler_residual(rows, kappa, active, m, npar, sol)
     if direction_spread(mix, active, m) < MIN_DIRECTION_SPREAD:
         return np.nan, np.nan, np.nan, m, np.nan, n_nbr, STATUS_DEGENERATE_DIRECTIONS
+    used, sse = euler_residual(rows, kappa, active, m, npar, sol)
     amp = math.sqrt(sol[1] * sol[1] + sol[2] * sol[2])
     return ((sol[0] + amp) * inv_r, (sol[0] - amp) * inv_r, 0.5 * math.atan2(sol[2], sol[1]),
             used, math.sqrt(sse / used) * inv_r, n_nbr, STATUS_OK)
@@ -124,10 +124,10 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
     blend : (m,) float64 in [0, 1], per query point: 0 equal weights, 1 distance weights
         (1 - r^2 / radius^2)^WEIGHT_POWER, between the two a mix of both weight functions
     opts : ``(ndir, slab, min_points, min_spread, unit_norm, corrected, half_frequency,
-        robust)`` (int, float, float, float, bool x 4): planes, the slab's half-width and the
-        farthest reach a half-set needs (fractions of ``radius``), the fewest points of a
-        half-set; ``unit_norm`` circle fits normalised by |t| = 1 (the paper) instead of
-        t1 = 1; ``section_blend``, ``half_frequency``, ``robust`` of
+        robust)`` (int, float, float, float, bool x 4): planes, the slab's half-width (fraction
+        of ``radius``), the fewest points of a half-set, the farthest reach it needs (fraction
+        of ``radius``); ``unit_norm`` circle fits normalised by |t| = 1 (the paper) instead of
+        t1 = 1; ``corrected`` (``section_blend``), ``half_frequency``, ``robust`` of
         :func:`meshcurv.principal_curvatures` (:attr:`meshcurv.options.Plan.fit`)
     out : ``(k1, k2, d1, d2, n_samples, residual, n_neighbors, status)``, (m,) or (m, 3)
         arrays written in place: NaN where no estimate is possible, and ``status`` (m,) int8

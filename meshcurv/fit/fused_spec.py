@@ -10,7 +10,7 @@ import numpy as np
 
 from .circle_spec import fit_normal_circle, sample_mix
 from .constants import MIN_DIRECTION_SPREAD, PLANE_OFFSET, WEIGHT_POWER
-from .euler_spec import fit_euler
+from .euler_spec import direction_spread, fit_euler
 from .frame_spec import tangent_u
 
 __all__ = ["curvature_at_point"]
@@ -83,7 +83,7 @@ def curvature_at_point(x, n, neighbors, radius, n_directions=8, slab=0.25, min_p
     if not np.isfinite(k1):
         return out
     # the measured directions must span the Euler model (not all along one curve)
-    if np.linalg.eigvalsh(np.cov(np.array(mixes)[used].T, bias=True))[0] < MIN_DIRECTION_SPREAD:
+    if direction_spread(np.array(mixes)[used]) < MIN_DIRECTION_SPREAD:
         return out
     out.update(k1=k1 / radius, k2=k2 / radius, d1=np.cos(theta1) * tu + np.sin(theta1) * tv,
                n_samples=int(used.sum()), residual=rms / radius)

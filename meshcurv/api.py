@@ -110,7 +110,8 @@ def no_estimate_reason(result, n_points, option="radius"):
 def _resolve_radius(radius, v, f, given_normals, settings):
     """The radius in model units: given, the default from the sampling (None) or the one
     :func:`meshcurv.autoradius.auto_radius` chooses ("auto", with this call's options)."""
-    finite = v[np.isfinite(v).all(axis=1)]
+    finite_rows = np.isfinite(v).all(axis=1)
+    n_finite = int(finite_rows.sum())
     if radius is None or isinstance(radius, str):
         if radius is None:
             radius = float(default_radius(v))
@@ -121,10 +122,10 @@ def _resolve_radius(radius, v, f, given_normals, settings):
         else:
             raise ValueError(f"radius must be a number of model units, None or 'auto', "
                              f"got {radius!r}")
-        if len(finite) > 1 and not (np.isfinite(radius) and radius > 0):
-            raise ValueError(_no_default_radius(finite))
+        if n_finite > 1 and not (np.isfinite(radius) and radius > 0):
+            raise ValueError(_no_default_radius(v[finite_rows]))
     radius = float(radius)
-    if len(finite) > 1:
+    if n_finite > 1:
         _check_radius(radius)
     return radius
 

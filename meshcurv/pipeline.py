@@ -179,13 +179,19 @@ def estimate_normals(v, radius, progress=False):
     """Oriented PCA normals (n, 3) of the cloud ``v`` ((n, 3) float64, contiguous; radius in
     model units, squaring safely): the "mst" normals of :func:`run`."""
     finite = np.flatnonzero(np.isfinite(v).all(axis=1))
-    search = ball_search(v, finite, radius)
+    return _spanning_tree_normals(v, radius, ball_search(v, finite, radius), finite, progress)
+
+
+def _spanning_tree_normals(v, radius, search, finite, progress):
+    """:func:`mst_normals` of the ``finite`` (k,) rows of ``v`` over the ball ``search``, in
+    blocks sized for their neighbor lists."""
     return mst_normals(v, radius, search, progress, block_size(search, finite, radius, "points"))
 
 
-def _start_normals(v, f, given, radius, search, plan, progress):
+def _start_normals(v, f, given, radius, search, finite, plan, progress):
     """``(normals, face_normals)`` before the blocks: the given ones, the faces', or the
-    spanning tree's (which needs every normal first); None where blocks estimate their own."""
+    spanning tree's (which needs every normal first); None where blocks estimate their own.
+    ``finite``: the finite rows of ``v`` (ball searches only)."""
     if plan.normals == "given":
         return given, None
     face_normals = None
@@ -193,9 +199,7 @@ def _start_normals(v, f, given, radius, search, plan, progress):
         with np.errstate(invalid="ignore"):       # NaN vertices give NaN normals
             face_normals = face_vertex_normals(v, f)
     if plan.normals == "mst":
-        finite = np.flatnonzero(np.isfinite(v).all(axis=1))
-        return mst_normals(v, radius, search, progress,
-                           block_size(search, finite, radius, "points")), None
+        return _spanning_tree_normals(v, radius, search, finite, progress), None
     return (face_normals if plan.normals == "faces" else None), face_normals
 
 
@@ -266,11 +270,15 @@ def run(v, f, given_normals, radius, query, plan, progress=False):
     -------
     CurvatureResult with q rows
     """
-    finite = np.flatnonzero(np.isfinite(v).all(axis=1))
-    search = kring_search(v, f, radius) if plan.use_kring else ball_search(v, finite, radius)
+    if plan.use_kring:
+        finite, search = None, kring_search(v, f, radius)
+    else:
+        finite = np.flatnonzero(np.isfinite(v).all(axis=1))
+        search = ball_search(v, finite, radius)
     # work per query from a sample: smaller blocks for large balls, an error for infeasible ones
     block = block_size(search, query, radius, "vertices" if f is not None else "points")
-    nv, face_normals = _start_normals(v, f, given_normals, radius, search, plan, progress)
+    nv, face_normals = _start_normals(v, f, given_normals, radius, search, finite, plan,
+                                      progress)
     out = _Outputs(len(query))
     # queries by grid cell for ball queries (the points a block touches then stay in cache);
     # as given for k-rings, whose memory accesses follow the mesh's own numbering

@@ -28,8 +28,10 @@ def check_las_output(in_path, out_path):
     """Before any work on a LAS/LAZ output: refuse an input that already has curvature
     dimensions, and say when the output gets another LAS version than the input (1.0)."""
     las = io.las_module(in_path)
-    las.check_annotatable(in_path)
-    version_in, version_out = las.output_version(in_path)
+    with las.open_las(in_path) as reader:  # one header read for both checks
+        header = reader.header
+    las.check_annotatable(in_path, header=header)
+    version_in, version_out = las.output_version(header)
     if version_out != version_in:
         print(f"meshcurv: note: {in_path} is LAS {version_in}, which laspy cannot write; "
               f"{out_path} will be LAS {version_out} with the same point format and "

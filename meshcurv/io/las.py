@@ -170,15 +170,18 @@ def _check_new_dims(path, point_format, names):
                          "annotate the original file")
 
 
-def check_annotatable(path, normals=None):
+def check_annotatable(path, normals=None, header=None):
     """The dimensions :func:`write_las_curvature` would add to ``path``; checked before any work.
 
     ``normals`` as in :func:`write_las_curvature` (None: NormalX..NormalZ when the file has no
-    normals). Raises ValueError when the file already has one of them (an annotated file),
+    normals); ``header``: the file's laspy header if the caller has read it already. Raises
+    ValueError when the file already has one of them (an annotated file),
     :class:`LasReadError` when it cannot be read.
     """
-    with open_las(path) as reader:
-        point_format = reader.header.point_format
+    if header is None:
+        with open_las(path) as reader:
+            header = reader.header
+    point_format = header.point_format
     if normals is None:
         normals = normal_dims(point_format) is None
     names = list(CURVATURE_FIELDS) + (list(NORMAL_FIELDS) if normals else [])

@@ -9,8 +9,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["Options", "OPTION_NAMES", "CHOICES", "MAX_DIRECTIONS", "check_options", "Plan",
-           "resolve_plan"]
+__all__ = ["Options", "OPTION_NAMES", "CHOICES", "ORIENTATIONS", "MAX_DIRECTIONS",
+           "check_options", "Plan", "resolve_plan"]
 
 # Research switches of the estimator: the fields of Options, in order.
 SWITCH_NAMES = ("slab", "min_points", "min_spread", "weighting", "circle_normalization",
@@ -26,6 +26,9 @@ CHOICES = {"neighborhood": ("auto", "kring", "ball"),
            "weighting": ("auto", "distance", "none"),
            "circle_normalization": ("tangent", "unit")}
 
+# The named values of ``orientation`` (besides a (3,) viewpoint).
+ORIENTATIONS = ("mst", "+z")
+
 # Most planes through the normal (``n_directions``). Each kernel thread holds 2 x that many
 # half-set accumulators and the robust step sorts the 2 x n_directions circle fits by insertion
 # (quadratic); beyond 64 planes (2.8 degrees apart) the slabs of half-width 0.25 radius overlap
@@ -37,7 +40,7 @@ def check_options(**options):
     """Check option names and values of :func:`meshcurv.principal_curvatures` without running it.
 
     Raises ValueError (one line) for an unknown name or a value out of its range; returns
-    ``orientation``: "mst" or a (3,) float64 viewpoint.
+    ``orientation``: "mst", "+z" or a (3,) float64 viewpoint.
 
     >>> check_options(n_directions=8, orientation=(0, 0, 10))
     array([ 0.,  0., 10.])
@@ -64,13 +67,13 @@ def check_options(**options):
             raise ValueError(f"n_directions must be a whole number from 3 to {MAX_DIRECTIONS}, "
                              f"got {nd!r}")
     orientation = options.get("orientation", "mst")
-    if isinstance(orientation, str) and orientation == "mst":
+    if isinstance(orientation, str) and orientation in ORIENTATIONS:
         return orientation
     if not isinstance(orientation, str):
         orientation = np.asarray(orientation, dtype=np.float64)
     if isinstance(orientation, str) or orientation.shape != (3,) or not np.isfinite(
             orientation).all():
-        raise ValueError(f"orientation must be 'mst' or a finite (3,) viewpoint, "
+        raise ValueError(f"orientation must be 'mst', '+z' or a finite (3,) viewpoint, "
                          f"got {options['orientation']!r}")
     return orientation
 
@@ -129,10 +132,19 @@ class Options:
         tilt with irregular sampling (0.7 degrees on a random sphere, up to 3 % in
         curvature), the quadric's normal does not but is noisier. None: refine estimated
         normals, use given ones as they are; True: refine given normals too; False: never.
-    orientation : "mst" or (3,) array-like
-        Global orientation of estimated point-cloud normals: "mst" propagates along a minimum
-        spanning tree and then turns each connected piece away from its own centroid; a (3,)
-        point orients every normal towards it (a scanner position).
+    orientation : "mst", "+z" or (3,) array-like
+        Global orientation of estimated point-cloud normals (meshes follow their faces).
+        "mst" (default): signs propagated along a minimum spanning tree, then one sign per
+        connected piece (:func:`meshcurv.normals.orient.piece_signs`): a closed piece (its
+        mean unit normal shorter than 0.25: by Gauss' theorem a closed surface's normals sum
+        to zero) points outward, ``sum (p - centroid) . n > 0`` (3 x its volume, right on
+        non-convex shapes too); an open piece (a one-sided view) points towards +z, the side a
+        viewer above sees (a dome, a terrain, the top of a torus, the inside of a bowl); an
+        open piece facing sideways (mean normal within ~6 degrees of horizontal) points away
+        from its centroid. "+z": every normal towards +z on its own (``n_z >= 0``; aerial
+        scans, the command line's default for LAS/LAZ input; walls stay undecided). A (3,)
+        point: every normal towards it (a scanner position; exact for what a scanner there
+        saw). ``result.orientation`` says which rule was used.
 
     Examples
     --------
@@ -188,8 +200,9 @@ class Plan(NamedTuple):
 
     ``use_kring``: k-ring neighborhoods (else ball queries). ``normals``: "given" (used as
     they are), "faces" (area-weighted face normals), "pca" (plane fits block by block, oriented
-    like the face normals if there are faces, else towards ``viewpoint``) or "mst" (plane fits
-    of all points first, oriented along a spanning tree). ``refine``: quadric-refined normals.
+    like the face normals if there are faces, else towards ``viewpoint``, else towards +z) or
+    "mst" (plane fits of all points first, oriented along a spanning tree). ``refine``:
+    quadric-refined normals.
     ``weighting``: as the option. ``fit``: the fused kernel's settings ``(n_directions, slab,
     min_points, min_spread, unit_norm, section_blend, half_frequency, robust)``, typed.
     """
@@ -232,7 +245,8 @@ def resolve_plan(has_faces, has_normals, n_directions=8, neighborhood="auto", sl
     elif normal_estimation == "faces":
         normals = "faces"
     else:
-        normals = "pca" if has_faces or viewpoint is not None else "mst"
+        spanning_tree = isinstance(orientation, str) and orientation == "mst"
+        normals = "mst" if spanning_tree and not has_faces else "pca"
     fit = (int(n_directions), float(slab), float(min_points), float(min_spread),
            circle_normalization == "unit", bool(section_blend), bool(half_frequency),
            bool(robust))

@@ -15,8 +15,8 @@ from tqdm.auto import tqdm
 from .fit import fused, jet
 from .neighbors import (BallGrid, KringWork, ball_counts, ball_grid, ball_neighbors,
                         edge_adjacency, kring_counts, kring_neighbors, spatial_order)
-from .normals import face_vertex_normals, orient, orient_like, orient_mst, orient_towards, \
-    pca_normals
+from .normals import face_vertex_normals, orient, orient_along, orient_like, orient_mst, \
+    orient_towards, pca_normals
 from .result import CurvatureResult
 
 __all__ = ["run", "estimate_normals", "weight_blend", "Search", "ball_search", "kring_search",
@@ -39,6 +39,8 @@ MAX_PAIRS = 1e11
 # and from there on equal weights are the more accurate.
 NOISE_SCALE = 2e-3
 
+# The direction of ``orientation="+z"``.
+_UP = np.array([0.0, 0.0, 1.0])
 # Neighbors per point in the graph of the spanning-tree orientation.
 _TREE_NEIGHBORS = 10
 
@@ -160,7 +162,9 @@ def kring_search(v, f, radius):
 
 def mst_normals(v, radius, search, progress, block=BLOCK):
     """PCA normals of every point, oriented along a spanning tree whose graph joins each point
-    to its nearest neighbors, taken from the search's lists (see :func:`ball_search`)."""
+    to its nearest neighbors, taken from the search's lists (see :func:`ball_search`).
+    Returns ``(normals (n, 3), note)``: the note says how the pieces were oriented
+    (:func:`meshcurv.normals.orient.orientation_note`)."""
     n = len(v)
     nv = np.full((n, 3), np.nan)
     graph = np.full((n, _TREE_NEIGHBORS), -1, dtype=np.int32)
@@ -172,14 +176,15 @@ def mst_normals(v, radius, search, progress, block=BLOCK):
         nv[pos] = pca_normals(search.points, v[pos], indptr, indices, radius)
         near = orient.nearest_in_lists(search.points, v[pos], indptr, indices, _TREE_NEIGHBORS)
         graph[pos] = near if rank is None else np.where(near >= 0, rank[near], -1)
-    return orient_mst(v, nv, neighbors=graph)
+    return orient_mst(v, nv, neighbors=graph, note=True)
 
 
 def estimate_normals(v, radius, progress=False):
     """Oriented PCA normals (n, 3) of the cloud ``v`` ((n, 3) float64, contiguous; radius in
     model units, squaring safely): the "mst" normals of :func:`run`."""
     finite = np.flatnonzero(np.isfinite(v).all(axis=1))
-    return _spanning_tree_normals(v, radius, ball_search(v, finite, radius), finite, progress)
+    return _spanning_tree_normals(v, radius, ball_search(v, finite, radius), finite,
+                                  progress)[0]
 
 
 def _spanning_tree_normals(v, radius, search, finite, progress):
@@ -189,31 +194,37 @@ def _spanning_tree_normals(v, radius, search, finite, progress):
 
 
 def _start_normals(v, f, given, radius, search, finite, plan, progress):
-    """``(normals, face_normals)`` before the blocks: the given ones, the faces', or the
+    """``(normals, face_normals, note)`` before the blocks: the given ones, the faces', or the
     spanning tree's (which needs every normal first); None where blocks estimate their own.
-    ``finite``: the finite rows of ``v`` (ball searches only)."""
+    ``finite``: the finite rows of ``v`` (ball searches only); ``note``: how the normals get
+    their sign (``CurvatureResult.orientation``)."""
     if plan.normals == "given":
-        return given, None
+        return given, None, "as given"
     face_normals = None
     if f is not None:
         with np.errstate(invalid="ignore"):       # NaN vertices give NaN normals
             face_normals = face_vertex_normals(v, f)
     if plan.normals == "mst":
-        return _spanning_tree_normals(v, radius, search, finite, progress), None
-    return (face_normals if plan.normals == "faces" else None), face_normals
+        normals, note = _spanning_tree_normals(v, radius, search, finite, progress)
+        return normals, None, note
+    note = ("oriented like the faces" if face_normals is not None else
+            "oriented towards +z" if plan.viewpoint is None else "oriented towards the viewpoint")
+    return (face_normals if plan.normals == "faces" else None), face_normals, note
 
 
 def _block_normals(nv, face_normals, idx, xb, indptr, indices, radius, search, plan):
     """Unit normals of one block: taken from ``nv``, or PCA plane fits oriented like the face
-    normals or towards the viewpoint."""
+    normals, towards the viewpoint or towards +z."""
     if nv is not None:
         qb = nv[idx]
     else:
         qb = pca_normals(search.points, xb, indptr, indices, radius)
         if face_normals is not None:
             orient_like(qb, face_normals[idx])
-        else:
+        elif plan.viewpoint is not None:
             orient_towards(qb, xb, plan.viewpoint)
+        else:
+            orient_along(qb, _UP)
     with np.errstate(invalid="ignore", divide="ignore"):
         return qb / np.linalg.norm(qb, axis=1, keepdims=True)
 
@@ -277,8 +288,8 @@ def run(v, f, given_normals, radius, query, plan, progress=False):
         search = ball_search(v, finite, radius)
     # work per query from a sample: smaller blocks for large balls, an error for infeasible ones
     block = block_size(search, query, radius, "vertices" if f is not None else "points")
-    nv, face_normals = _start_normals(v, f, given_normals, radius, search, finite, plan,
-                                      progress)
+    nv, face_normals, note = _start_normals(v, f, given_normals, radius, search, finite, plan,
+                                            progress)
     out = _Outputs(len(query))
     # queries by grid cell for ball queries (the points a block touches then stay in cache);
     # as given for k-rings, whose memory accesses follow the mesh's own numbering
@@ -290,4 +301,6 @@ def run(v, f, given_normals, radius, query, plan, progress=False):
         qb = _block_normals(nv, face_normals, idx, xb, indptr, indices, radius, search, plan)
         _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan)
         del indptr, indices
-    return out.result(radius)
+    res = out.result(radius)
+    res.orientation = note
+    return res

@@ -63,6 +63,10 @@ class CurvatureResult:
     radius : float, the neighborhood radius used, model units
     status : (n,) int8, why a row has no estimate (:class:`Status`; ``Status.OK`` where
         ``valid``), or None where the producer does not tell
+    orientation : str or None, how the normals got their sign, one line: "as given",
+        "oriented like the faces", "oriented towards the viewpoint", "oriented towards +z",
+        or the spanning tree's rule per piece, e.g. "oriented outward (closed surface)" (see
+        :func:`meshcurv.normals.orient.piece_signs`); None where the producer does not tell
     """
 
     k1: np.ndarray
@@ -77,6 +81,7 @@ class CurvatureResult:
     noise: np.ndarray
     radius: float
     status: np.ndarray = None
+    orientation: str = None
 
     @property
     def mean(self):

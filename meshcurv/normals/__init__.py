@@ -6,7 +6,8 @@ so point-cloud normals are oriented consistently before any curvature is compute
 """
 
 from .faces import face_vertex_normals
-from .orient import orient_like, orient_mst, orient_towards
+from .orient import orient_along, orient_like, orient_mst, orient_towards
 from .pca import pca_normals
 
-__all__ = ["face_vertex_normals", "pca_normals", "orient_like", "orient_towards", "orient_mst"]
+__all__ = ["face_vertex_normals", "pca_normals", "orient_like", "orient_towards", "orient_along",
+           "orient_mst"]

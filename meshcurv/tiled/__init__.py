@@ -34,14 +34,15 @@ Normal orientation across tiles
 -------------------------------
 - given normals (NormalX.. / nx.. in the file, ``normals=`` in memory): used as they are; the
   result equals the untiled run with those normals;
-- ``orientation=(x, y, z)`` viewpoint: every normal is flipped towards that scanner position,
-  so tiles agree by construction and the result equals the untiled run;
+- ``orientation=(x, y, z)`` viewpoint, or ``"+z"``: every normal is flipped towards that scanner
+  position (or up), so tiles agree by construction and the result equals the untiled run;
 - ``orientation="mst"``: each tile orients its tile + halo by minimum-spanning-tree propagation
   (:func:`meshcurv.normals.orient_mst`). A tile's halo points are its neighbors' own points, so
   each pair of adjacent tiles votes ``sum(n_A . n_B)`` over their shared points; the driver then
   flips whole tiles along a maximum spanning tree of the tile graph (strongest overlaps first)
-  and finally flips each connected group of tiles so its normals point away from its centroid on
-  average, the rule ``orient_mst`` applies to a whole cloud. The curvature pass runs with the
+  and finally gives each connected group of tiles the sign a whole cloud's piece would get
+  (:func:`meshcurv.normals.orient.piece_signs`: outward if closed, towards +z if open), from
+  the tiles' partial sums. The curvature pass runs with the
   flipped normals (refined like estimated ones), so its values equal an untiled run given the
   same normals with ``refine_normals=True``; the normals agree
   with an untiled MST run wherever the propagation itself agrees (smooth, well-sampled surfaces).

@@ -1,29 +1,35 @@
 """Normal orientation across the tiles of an ``orientation="mst"`` run: one flip per tile so that
-adjacent tiles agree in their overlaps and each connected group of tiles points outward."""
+adjacent tiles agree in their overlaps, and one global sign per connected group of tiles by the
+rule a whole cloud's pieces follow (:func:`meshcurv.normals.orient.piece_signs`: closed groups
+outward, open ones towards +z)."""
 
 import os
 
 import numpy as np
 
+from ..normals.orient import orientation_note, piece_signs
 from .grid import tile_name
 from .work import read_json
 
 __all__ = ["tile_flips"]
 
 
-def tile_flips(work, names):
-    """+1/-1 per tile so that tiles agree in their overlaps and each group points outward.
+def tile_flips(work, names, note=False):
+    """+1/-1 per tile so that tiles agree in their overlaps and each group takes the sign
+    :func:`meshcurv.normals.orient.piece_signs` gives it.
 
     ``work``: the work folder (``normals/<tile>.npz|.json`` of every tile in ``names``).
     Reads the overlap data of one tile and its neighbors' border bands at a time, so the
-    driver's memory is bounded by a few tiles' borders.
+    driver's memory is bounded by a few tiles' borders. With ``note``, also returns
+    :func:`meshcurv.normals.orient.orientation_note` of the groups' rules.
     """
     if not names:
-        return {}
+        return ({}, orientation_note([], [])) if note else {}
     votes = _overlap_votes(work, names)
     flips, n_comp, labels = _agreeing_flips(votes)
-    _flip_groups_outward(work, names, flips, n_comp, labels)
-    return {nm: int(f) for nm, f in zip(names, flips)}
+    text = _sign_groups(work, names, flips, n_comp, labels)
+    flips = {nm: int(f) for nm, f in zip(names, flips)}
+    return (flips, text) if note else flips
 
 
 def _overlap_votes(work, names):
@@ -83,17 +89,21 @@ def _agreeing_flips(vote_m):
     return flips, n_comp, labels
 
 
-def _flip_groups_outward(work, names, flips, n_comp, labels):
-    """Flip (in place) each group of tiles whose normals point towards its centroid on average:
-    the sign of sum over points of (p - centroid) . n, from each tile's partial sums."""
+def _sign_groups(work, names, flips, n_comp, labels):
+    """Flip (in place) each group of tiles as :func:`meshcurv.normals.orient.piece_signs`
+    decides from the group's sums (count, sum of n, sum of (p - centroid) . n), gathered from
+    each tile's partial sums; returns the note of the rules taken."""
     st = np.array([read_json(os.path.join(work, "normals", f"{nm}.json"))["orient"]
                    for nm in names], dtype=np.float64).reshape(len(names), 8)
+    count, normal_sum, score = np.zeros(n_comp), np.zeros((n_comp, 3)), np.zeros(n_comp)
     for c in range(n_comp):
         g = labels == c
-        cnt = st[g, 7].sum()
-        if cnt == 0:
+        count[c] = st[g, 7].sum()
+        if count[c] == 0:
             continue
-        centroid = st[g, 4:7].sum(axis=0) / cnt
-        score = np.sum(flips[g] * (st[g, 0] - st[g, 1:4] @ centroid))
-        if score < 0:
-            flips[g] *= -1.0
+        centroid = st[g, 4:7].sum(axis=0) / count[c]
+        normal_sum[c] = flips[g] @ st[g, 1:4]
+        score[c] = np.sum(flips[g] * (st[g, 0] - st[g, 1:4] @ centroid))
+    sign, rule = piece_signs(count, normal_sum, score)
+    flips *= sign[labels]
+    return orientation_note(rule, count)

@@ -38,6 +38,7 @@ class TiledReport:
         Python/numpy allocations of the task, and with ``orientation="mst"`` the same for the
         normal pass prefixed ``normals_``}
     flips : dict tile name -> +1/-1 applied to the tile's MST normals (``orientation="mst"``)
+    orientation : str, how the normals got their sign (``CurvatureResult.orientation``)
     stage_seconds : dict stage -> wall time: "start" (cluster), "scatter", "normals", "tiles",
         "write"
     seconds : wall time of the whole run; out_path : str or None
@@ -55,12 +56,13 @@ class TiledReport:
     stage_seconds: dict = field(default_factory=dict)
     seconds: float = 0.0
     out_path: str = None
+    orientation: str = None
 
 
 @dataclass(frozen=True)
 class _Stages:
     """What every stage of one run needs: the connected client, the work folder and the
-    estimator's parameters (radius in model units, orientation "mst" or a (3,) tuple)."""
+    estimator's parameters (radius in model units, orientation "mst", "+z" or a (3,) tuple)."""
 
     client: object
     threads: object
@@ -90,10 +92,17 @@ def _process(stages, chunk_jobs, report, has_normals):
     names = sorted(n for n, cids in tiles.items() if any(summaries[c][n][0] for c in cids))
     report.n_tiles = len(names)
     flips, normal_stats = {}, {}
-    if isinstance(stages.orientation, str) and not has_normals:
+    if has_normals:
+        report.orientation = "as given"
+    elif isinstance(stages.orientation, tuple):
+        report.orientation = "oriented towards the viewpoint"
+    else:
+        report.orientation = "oriented towards +z"      # "mst": replaced by the groups' rules
+    if stages.orientation == "mst" and not has_normals:
         t0 = time.perf_counter()
         normal_stats = _normals_stage(stages, names, tiles)
-        flips = report.flips = tile_flips(stages.work, names)
+        report.flips, report.orientation = tile_flips(stages.work, names, note=True)
+        flips = report.flips
         report.stage_seconds["normals"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     _curvature_stage(stages, names, tiles, flips, report)
@@ -165,9 +174,10 @@ def annotate_tiled(in_path, out_path, radius=None, tile_size=None, *, orientatio
     radius : float, model units. Default: :func:`meshcurv.default_radius` of the first chunk.
     tile_size : float, model units, side of the square x, y tiles. Default: about 10^6 points
         per tile from the header's extent.
-    orientation : "mst" or (3,) viewpoint
-        Used when the file has no normals. A viewpoint (scanner position) reproduces the untiled
-        run exactly; "mst" orients per tile and makes tiles agree (see the module docstring).
+    orientation : "mst", "+z" or (3,) viewpoint
+        Used when the file has no normals. A viewpoint (scanner position) or "+z" (every normal
+        up, the command line's default for LAS/LAZ) reproduces the untiled run exactly; "mst"
+        orients per tile and makes tiles agree (see the module docstring).
     scheduler : None, str or distributed.Client
         None starts a LocalCluster (``n_workers`` processes, one thread each) and closes it at
         the end; a string is the address of an existing scheduler ("tcp://host:8786").
@@ -297,9 +307,9 @@ def principal_curvatures_tiled(vertices, radius, tile_size, normals=None, *, ori
     """:func:`meshcurv.principal_curvatures` of an in-memory point cloud, computed in tiles on Dask.
 
     The driver cuts the cloud into tile + halo pieces in a work folder (which workers must see);
-    each task loads one tile + halo only. With given normals or a viewpoint ``orientation`` the
-    result equals ``principal_curvatures(vertices, normals=..., radius=radius, orientation=...)``
-    bit for bit (module docstring).
+    each task loads one tile + halo only. With given normals, ``orientation="+z"`` or a
+    viewpoint the result equals ``principal_curvatures(vertices, normals=..., radius=radius,
+    orientation=...)`` bit for bit (module docstring).
 
     Parameters
     ----------
@@ -360,6 +370,7 @@ def principal_curvatures_tiled(vertices, radius, tile_size, normals=None, *, ori
                            radius)
                  for c, s in enumerate(range(0, n, chunk_size))]
     res = concat_results(parts, radius)
+    res.orientation = report.orientation
     report.stage_seconds["write"] = time.perf_counter() - t_write
     report.seconds = time.perf_counter() - t0
     return (res, report) if return_report else res
@@ -367,9 +378,9 @@ def principal_curvatures_tiled(vertices, radius, tile_size, normals=None, *, ori
 
 def _check_estimator_options(orientation, options):
     """Reject estimator options the tiled run cannot take, before any work starts; returns
-    ``orientation`` as "mst" or a tuple (sent to every task). Names and values are checked by
-    :func:`meshcurv.options.check_options`; here only what tiles add: the run's own keywords,
-    and point-cloud neighborhoods and normals."""
+    ``orientation`` as "mst", "+z" or a tuple (sent to every task). Names and values are
+    checked by :func:`meshcurv.options.check_options`; here only what tiles add: the run's own
+    keywords, and point-cloud neighborhoods and normals."""
     reserved = sorted(set(options) & set(_RESERVED))
     if reserved:
         raise ValueError(f"the tiled run sets {reserved} itself; pass them as its own arguments")

@@ -387,7 +387,7 @@ def test_tiling_flags_reach_annotate_tiled(tmp_path, capsys, las_file, monkeypat
     assert (call["in_path"], call["out_path"]) == (str(las_file), str(out))
     assert call["radius"] == 0.25 and call["tile_size"] == 0.5
     assert call["scheduler"] is None and call["n_directions"] == 6
-    assert call["orientation"] == "mst"
+    assert call["orientation"] == "+z"        # LAS input: seen from above by default
     assert "3000 points in 4 tiles" in stdout
 
     # --viewpoint reaches the tiles as their orientation

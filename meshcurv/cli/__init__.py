@@ -16,7 +16,8 @@ import sys
 import numpy as np
 
 from .. import io, shape
-from .annotate import AnnotateOptions, CommandError, annotate_file, check_annotate_options
+from .annotate import AnnotateOptions, CommandError, annotate_file, check_annotate_options, \
+    orientation_line
 from .batch import BatchInterrupted, failure_text, run_batch
 from .info import info_text
 from .tiles import annotate_tiled_command, check_las_output
@@ -56,12 +57,13 @@ def _add_estimation_options(p):
     g.add_argument("--normals", choices=("auto", "file", "estimate"), default="auto",
                    help="auto: a point cloud's own normals if the file has them, else "
                         "estimated (PCA over the neighborhood, oriented by the faces for "
-                        "meshes, by --viewpoint or a spanning tree for clouds); "
+                        "meshes, by --viewpoint, +z or a spanning tree for clouds); "
                         "file: require the file's normals; estimate: ignore them")
     g.add_argument("--viewpoint", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
                    help="orient estimated point-cloud normals towards this point (the scanner "
-                        "position, model units); exact and tile-independent, unlike the "
-                        "default spanning-tree orientation")
+                        "position, model units). Default: towards +z for LAS/LAZ input (seen "
+                        "from above); other clouds along a spanning tree, each connected piece "
+                        "outward if it is closed, towards +z if it is open")
     g = p.add_argument_group("output (PLY; a LAS/LAZ output has no quality or colour)")
     g.add_argument("--quality", choices=shape.FIELDS, default="mean",
                    help="field copied to the PLY 'quality' property and coloured (default mean)")
@@ -197,6 +199,7 @@ def _cmd_annotate(args):
               "their curvature is NaN", file=sys.stderr)
     print(f"{s['output']}: {s['n_valid']} of {s['n_vertices']} vertices estimated, radius "
           f"{s['radius']:.6g} (model units), {s['seconds']:.1f} s")
+    print(orientation_line(s["orientation"], args.input, options))
     if args.preview:
         print(f"{args.preview}: preview coloured by shape index")
     return 0

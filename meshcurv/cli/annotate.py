@@ -15,7 +15,8 @@ from .. import io, shape
 from ..options import check_options
 
 __all__ = ["CommandError", "AnnotateOptions", "parse_radius", "radius_in_model_units",
-           "check_annotate_options", "annotate_file", "write_preview"]
+           "check_annotate_options", "orientation_for", "orientation_line", "annotate_file",
+           "write_preview"]
 
 
 class CommandError(Exception):
@@ -38,7 +39,7 @@ class AnnotateOptions:
     quality : field written to ``quality`` and coloured
     colormap : MeshLab colour map name, see :data:`meshcurv.shape.COLORMAPS`
     viewpoint : (3,) tuple or None, orient estimated point-cloud normals towards this point
-        (a scanner position) instead of along a spanning tree
+        (a scanner position) instead of the default (:func:`orientation_for`)
     """
 
     radius: str = None
@@ -76,6 +77,26 @@ def radius_in_model_units(spec, diagonal):
     return value / 100.0 * diagonal() if percent else value
 
 
+def orientation_for(input_path, options):
+    """The estimator's ``orientation`` for this input: the ``--viewpoint`` if given; else "+z"
+    for LAS/LAZ (airborne scans are seen from above: every normal up, as PDAL and CloudCompare
+    do), else "mst" (one sign per connected piece: outward if closed, towards +z if open)."""
+    if options.viewpoint is not None:
+        return options.viewpoint
+    return "+z" if io.file_extension(input_path) in (".las", ".laz") else "mst"
+
+
+def orientation_line(note, input_path, options):
+    """The one line telling the user how the normals got their sign: ``note`` is
+    ``CurvatureResult.orientation`` of the run on ``input_path`` with ``options``."""
+    if note == "as given":
+        return "meshcurv: normals taken from the file as they are"
+    if note == "oriented like the faces" or options.viewpoint is not None:
+        return f"meshcurv: normals {note}"
+    why = "LAS input; " if orientation_for(input_path, options) == "+z" else ""
+    return f"meshcurv: normals {note} ({why}--viewpoint to change)"
+
+
 def check_annotate_options(options):
     """Raise CommandError(code 2) for option values no file can fix."""
     try:
@@ -86,7 +107,7 @@ def check_annotate_options(options):
         if options.colormap.lower() not in (c.lower() for c in shape.COLORMAPS):
             raise ValueError(f"--colormap must be one of {', '.join(shape.COLORMAPS)}")
         check_options(n_directions=options.directions, neighborhood=options.neighborhood,
-                      orientation="mst" if options.viewpoint is None else options.viewpoint)
+                      orientation=orientation_for("", options))
     except ValueError as exc:
         raise CommandError(str(exc), 2) from None
 
@@ -111,7 +132,8 @@ def annotate_file(input_path, output_path, options=AnnotateOptions(), preview=No
                   progress=False):
     """Read ``input_path``, estimate curvatures, write the annotated PLY ``output_path``.
 
-    Returns a dict of summary values (``n_vertices, n_faces, n_valid, radius, seconds``).
+    Returns a dict of summary values (``n_vertices, n_faces, n_valid, radius, seconds`` and
+    ``orientation``, the result's note on how the normals got their sign).
     Raises :class:`meshcurv.io.MeshFileError` or ValueError (message names the file) for bad
     input; no output file is left behind then.
     """
@@ -132,8 +154,7 @@ def annotate_file(input_path, output_path, options=AnnotateOptions(), preview=No
             data.vertices, None if data.is_point_cloud else data.faces,
             normals=_normals_for(data, options.normals), radius=radius,
             n_directions=int(options.directions), neighborhood=options.neighborhood,
-            orientation="mst" if options.viewpoint is None else options.viewpoint,
-            progress=progress)
+            orientation=orientation_for(input_path, options), progress=progress)
     except ValueError as exc:
         raise io.MeshFileError(f"{input_path}: {exc}") from exc
     n_valid = int(result.valid.sum())
@@ -152,7 +173,8 @@ def annotate_file(input_path, output_path, options=AnnotateOptions(), preview=No
             "n_vertices": len(data.vertices),
             "n_faces": 0 if data.is_point_cloud else len(data.faces),
             "n_valid": n_valid, "n_nonfinite": len(data.vertices) - n_finite,
-            "radius": result.radius, "seconds": time.perf_counter() - t0}
+            "radius": result.radius, "orientation": result.orientation,
+            "seconds": time.perf_counter() - t0}
 
 
 def write_preview(path, data, result, elev=30.0, azim=-60.0):

@@ -8,7 +8,7 @@ import sys
 import numpy as np
 
 from .. import io
-from .annotate import CommandError, radius_in_model_units
+from .annotate import CommandError, orientation_for, orientation_line, radius_in_model_units
 from .batch import dask_client
 
 __all__ = ["annotate_tiled_command", "check_las_output"]
@@ -82,8 +82,7 @@ def annotate_tiled_command(args, options):
                                     progress=bool(args.progress or sys.stderr.isatty()),
                                     n_directions=int(options.directions),
                                     neighborhood=options.neighborhood,
-                                    orientation=("mst" if options.viewpoint is None
-                                                 else options.viewpoint))
+                                    orientation=orientation_for(args.input, options))
         except TileError as exc:
             raise CommandError(f"{io.first_line(exc)} (finished tiles are kept "
                                f"in {args.output}.meshcurv-work; re-run to resume)") from None
@@ -96,5 +95,7 @@ def annotate_tiled_command(args, options):
     print(f"{args.output}: {report.n_points} points in {report.n_tiles} tiles of side "
           f"{report.tile_size:.6g} (model units), radius {report.radius:.6g} (model units), "
           f"{report.seconds:.1f} s")
+    if report.orientation is not None:
+        print(orientation_line(report.orientation, args.input, options))
     return 0
 

@@ -1,0 +1,246 @@
+"""The global sign of estimated normals: closed clouds outward, open one-sided views towards the
+viewer above (+z), LAS/LAZ input towards +z, a viewpoint where one is given - checked against
+the exact normals and mean curvatures of analytic surfaces, with no normals given."""
+
+import os
+
+import numpy as np
+import pytest
+
+import meshcurv
+from meshcurv import cli, io
+from meshcurv.normals.orient import PIECE_RULES, piece_signs
+
+CNC = "/work/shared/bench/cnc"
+# The notes CurvatureResult.orientation gives for the two rules of a spanning-tree run.
+CLOSED, OPEN = (f"oriented {r}" for r in PIECE_RULES[:2])
+
+
+def torus_patch(n, keep, major=3.0, minor=1.0, seed=0):
+    """``n`` points uniform by area on the part of a torus about z where ``keep(u, v)`` (u
+    around the z axis, v around the tube, 0 on the outer equator); exact outward normals and
+    mean curvature ``(1/minor + cos v / (major + minor cos v)) / 2``, random order."""
+    rng = np.random.default_rng(seed)
+    uv = np.empty((0, 2))
+    while len(uv) < n:
+        u, v, w = rng.uniform(0.0, 2.0 * np.pi, (3, 4 * n))
+        # rejection: the area element is proportional to major + minor cos v
+        take = (w / (2.0 * np.pi) < (major + minor * np.cos(v)) / (major + minor)) & keep(u, v)
+        uv = np.vstack([uv, np.column_stack([u[take], v[take]])])
+    u, v = uv[:n].T
+    rho = major + minor * np.cos(v)
+    points = np.column_stack([rho * np.cos(u), rho * np.sin(u), minor * np.sin(v)])
+    normals = np.column_stack([np.cos(v) * np.cos(u), np.cos(v) * np.sin(u), np.sin(v)])
+    return points, normals, 0.5 * (1.0 / minor + np.cos(v) / rho)
+
+
+def sphere_part(n, keep=None, inside=False, seed=0):
+    """``n`` uniform points on the unit sphere where ``keep(points)``; normals outward (or, with
+    ``inside``, inward: the side a viewer inside a bowl sees), mean curvature +1 (-1)."""
+    rng = np.random.default_rng(seed)
+    p = rng.normal(size=(8 * n, 3))
+    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    p = p[keep(p)][:n] if keep is not None else p[:n]
+    s = -1.0 if inside else 1.0
+    return p, s * p, np.full(len(p), s)
+
+
+def valley_terrain(n, seed=0):
+    """A terrain-like height field, a sum of three sines over the square [-5, 5]^2 whose broad
+    shape is a valley (so "away from the centroid" would point down); ``n`` uniform points,
+    upward normals, mean curvature convex positive under them."""
+    rng = np.random.default_rng(seed)
+    x, y = rng.uniform(-5.0, 5.0, (2, n))
+    amp, kx, ky = np.array([0.6, 0.6, 0.1]), np.array([0.3, 0.0, 2.0]), np.array([0.0, 0.3, 1.0])
+    t = np.outer(x, kx) + np.outer(y, ky) + [-np.pi / 2, -np.pi / 2, 0.0]     # (n, 3) phases
+    z = np.sin(t) @ amp
+    fx, fy = np.cos(t) @ (amp * kx), np.cos(t) @ (amp * ky)
+    fxx, fxy, fyy = (-np.sin(t) @ (amp * a * b) for a, b in ((kx, kx), (kx, ky), (ky, ky)))
+    g = np.sqrt(1.0 + fx * fx + fy * fy)
+    normals = np.column_stack([-fx, -fy, np.ones(n)]) / g[:, None]
+    mean = -((1 + fy * fy) * fxx - 2 * fx * fy * fxy + (1 + fx * fx) * fyy) / (2 * g ** 3)
+    return np.column_stack([x, y, z]), normals, mean
+
+
+def goursat_cloud():
+    """The benchmark's 10k-point Goursat surface 0.03 (x^4+y^4+z^4) - 2 (x^2+y^2+z^2) - 8 = 0
+    with exact outward normals; mean curvature div(grad F / |grad F|) / 2 (convex positive)."""
+    d = np.loadtxt(os.path.join(CNC, "goursat_010000.pts"), comments="#")
+    p, normals = d[:, :3], d[:, 3:6]
+    grad = 0.12 * p ** 3 - 4.0 * p
+    hess = 0.36 * p ** 2 - 4.0                     # diagonal of the Hessian
+    g = np.linalg.norm(grad, axis=1)
+    mean = (g ** 2 * hess.sum(axis=1) - (grad ** 2 * hess).sum(axis=1)) / (2 * g ** 3)
+    return p, normals, mean
+
+
+def cnc_torus():
+    """The benchmark's 10k-point torus (R = 6, r = 2) with exact outward normals."""
+    d = np.loadtxt(os.path.join(CNC, "torus_010000.pts"), comments="#")
+    p = d[:, :3]
+    cos_v = (np.hypot(p[:, 0], p[:, 1]) - 6.0) / 2.0
+    return p, d[:, 3:6], 0.5 * (0.5 + cos_v / (6.0 + 2.0 * cos_v))
+
+
+OPEN_VIEWS = {
+    # a LiDAR-like view of a torus from above: the part facing up (n_z > 0)
+    "torus_top": lambda: torus_patch(5000, lambda u, v: np.sin(v) > 0),
+    # the inner, saddle-shaped half of it: its centroid lies on its convex side
+    "torus_inner_top": lambda: torus_patch(5000, lambda u, v: (v > np.pi / 2) & (v < np.pi)),
+    "terrain": lambda: valley_terrain(5000),
+    "dome": lambda: sphere_part(4000, lambda p: p[:, 2] > 0),
+    "bowl_seen_from_above": lambda: sphere_part(4000, lambda p: p[:, 2] < 0, inside=True),
+}
+CLOSED_CLOUDS = {
+    "sphere": lambda: sphere_part(5000),
+    "torus": lambda: torus_patch(8000, lambda u, v: np.ones_like(u, dtype=bool)),
+    "cnc_torus": cnc_torus,
+    "goursat": goursat_cloud,
+}
+
+
+def assert_signs_right(res, normals, mean):
+    """Every valid normal on the side of the exact one, and the mean curvature's sign right
+    wherever it is clearly non-zero (a third of its 90th percentile: the estimate's own error
+    at the default radius is a few percent of that) and the ball is not cut by a border (at
+    least 3/4 of the median neighbor count: one-sided balls have about half)."""
+    ok = res.valid
+    assert ok.mean() > 0.95
+    assert (np.einsum("ij,ij->i", res.normals[ok], normals[ok]) > 0).all()
+    full_ball = res.n_neighbors >= 0.75 * np.median(res.n_neighbors)
+    clear = ok & full_ball & (np.abs(mean) > np.percentile(np.abs(mean), 90) / 3)
+    assert clear.sum() > 0.3 * ok.sum()
+    assert (np.sign(res.mean[clear]) == np.sign(mean[clear])).all()
+
+
+@pytest.mark.parametrize("name", sorted(OPEN_VIEWS))
+def test_one_sided_views_face_the_viewer_above_at_the_defaults(name):
+    points, normals, mean = OPEN_VIEWS[name]()
+    res = meshcurv.principal_curvatures(points)
+    assert res.orientation == OPEN
+    assert_signs_right(res, normals, mean)
+
+
+@pytest.mark.parametrize("name", sorted(CLOSED_CLOUDS))
+def test_closed_clouds_point_outward_at_the_defaults(name):
+    points, normals, mean = CLOSED_CLOUDS[name]()
+    res = meshcurv.principal_curvatures(points)
+    assert res.orientation == CLOSED
+    assert_signs_right(res, normals, mean)
+
+
+def test_each_connected_piece_takes_its_own_rule():
+    """A closed sphere and, far from it, an open terrain in one cloud: one sign each."""
+    sp, sn, sm = sphere_part(3000)
+    tp, tn, tm = valley_terrain(5000)
+    tp = tp + [30.0, 0.0, 0.0]
+    res = meshcurv.principal_curvatures(np.vstack([sp, tp]), radius=0.6)
+    assert res.orientation.startswith("oriented by piece: outward (closed surface) on 1 piece")
+    assert "towards +z (open surface) on 1 piece of 5000 points" in res.orientation
+    assert_signs_right(res, np.vstack([sn, tn]), np.concatenate([sm, tm]))
+
+
+def test_piece_signs_rules():
+    """Closed: sign of the centroid score; open facing up or down: up; open sideways: the
+    centroid score; a mean normal of length 0.25 is open, just below it closed."""
+    count = [1000, 1000, 1000, 1000, 1000]
+    normal_sum = [[0, 0, -10], [0, 0, -600], [300, 0, 20], [0, 0, 250], [0, 0, 249]]
+    score = [4.0, 9.0, -3.0, -1.0, -1.0]
+    sign, rule = piece_signs(count, normal_sum, score)
+    assert sign.tolist() == [1, -1, -1, 1, -1]
+    assert rule.tolist() == [0, 1, 2, 1, 0]
+
+
+def test_plus_z_orients_every_normal_up_on_its_own():
+    points, normals, mean = valley_terrain(4000)
+    res = meshcurv.principal_curvatures(points, orientation="+z")
+    assert res.orientation == "oriented towards +z"
+    assert_signs_right(res, normals, mean)
+
+
+def test_a_viewpoint_decides_every_normal():
+    """A scanner inside the bowl's sphere below it sees the bowl from its convex side."""
+    points, normals, mean = sphere_part(4000, lambda p: p[:, 2] < 0)
+    res = meshcurv.principal_curvatures(points, orientation=(0.0, 0.0, -50.0))
+    assert res.orientation == "oriented towards the viewpoint"
+    assert_signs_right(res, normals, mean)
+
+
+def write_las(path, points):
+    """``points`` as a LAS 1.2 file (point format 3, no normals, 1e-5 scale)."""
+    laspy = pytest.importorskip("laspy")
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.scales = [1e-5, 1e-5, 1e-5]
+    header.offsets = [0.0, 0.0, 0.0]
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = points.T
+    las.write(str(path))
+
+
+def run(capsys, *argv):
+    code = cli.main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_las_input_is_oriented_towards_plus_z_and_says_so(tmp_path, capsys):
+    """The inner top of a torus as a LAS file: the spanning tree's "away from the centroid"
+    would flip it; LAS input is seen from above."""
+    points, normals, mean = torus_patch(4000, lambda u, v: (v > np.pi / 2) & (v < np.pi))
+    write_las(tmp_path / "scan.las", points)
+    code, out, err = run(capsys, "annotate", tmp_path / "scan.las", "-o", tmp_path / "a.ply")
+    assert code == 0, err
+    assert "meshcurv: normals oriented towards +z (LAS input; --viewpoint to change)" in out
+    data = io.read(str(tmp_path / "a.ply"))
+    valid = data.fields["valid"] > 0
+    assert valid.mean() > 0.95
+    assert (np.einsum("ij,ij->i", data.normals[valid], normals[valid]) > 0).all()
+    clear = valid & (np.abs(mean) > np.percentile(np.abs(mean), 90) / 3)
+    assert (np.sign(data.fields["mean"][clear]) == np.sign(mean[clear])).all()
+    # a scanner position given by the user turns them
+    code, out, err = run(capsys, "annotate", tmp_path / "scan.las", "-o", tmp_path / "b.ply",
+                         "--viewpoint", "0", "0", "-100")
+    assert code == 0, err
+    assert "meshcurv: normals oriented towards the viewpoint" in out
+    flipped = io.read(str(tmp_path / "b.ply"))
+    assert (np.einsum("ij,ij->i", flipped.normals[valid], normals[valid]) < 0).all()
+
+
+def test_other_clouds_say_which_rule_the_spanning_tree_took(tmp_path, capsys):
+    points, _, _ = sphere_part(3000)
+    np.savetxt(tmp_path / "sphere.xyz", points)
+    code, out, err = run(capsys, "annotate", tmp_path / "sphere.xyz", "-o", tmp_path / "s.ply")
+    assert code == 0, err
+    assert "meshcurv: normals oriented outward (closed surface) (--viewpoint to change)" in out
+
+
+@pytest.fixture(scope="module")
+def client():
+    """An in-process Dask cluster, one worker thread."""
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as c:
+        yield c
+
+
+def test_tiled_runs_orient_as_the_untiled_one(client):
+    """"+z" is decided point by point: bit-identical to the untiled run. "mst": the groups of
+    tiles take the rule a whole cloud's piece takes (here towards +z, where the old
+    "away from the centroid" pointed the valley down)."""
+    from meshcurv.tiled import principal_curvatures_tiled
+
+    points, normals, mean = valley_terrain(6000, seed=3)
+    radius = 0.7                       # about 90 neighbors
+    for orientation in ("+z", "mst"):
+        tiled = principal_curvatures_tiled(points, radius, 5.0, orientation=orientation,
+                                           scheduler=client, threads_per_task=1)
+        untiled = meshcurv.principal_curvatures(points, radius=radius, orientation=orientation)
+        assert tiled.orientation == untiled.orientation
+        assert_signs_right(tiled, normals, mean)
+        if orientation == "+z":
+            for name in ("k1", "k2", "normals", "valid", "status"):
+                assert np.array_equal(getattr(tiled, name), getattr(untiled, name),
+                                      equal_nan=name in ("k1", "k2", "normals")), name
+        else:
+            np.testing.assert_allclose(tiled.normals, untiled.normals, atol=1e-12)

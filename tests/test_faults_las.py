@@ -224,7 +224,7 @@ def test_failing_tile_task_is_one_line_naming_the_tile(tmp_path, dashboard_port_
     work = out + ".meshcurv-work"
     # the work folder of a finished run, as the CLI makes it (same options), kept
     annotate_tiled(src, out, 2.0, 20.0, n_workers=2, progress=False, keep_work=True,
-                   n_directions=8, neighborhood="auto")
+                   n_directions=8, neighborhood="auto", orientation="+z")
     os.remove(out)
     broken = "t_1_2"
     shutil.rmtree(os.path.join(work, "results", broken))
@@ -239,7 +239,7 @@ def test_failing_tile_task_is_one_line_naming_the_tile(tmp_path, dashboard_port_
     assert proc.returncode == 1
     lines = _stderr_lines(err)
     assert len(lines) == 1, err  # the worker's "Compute Failed" block is not printed
-    assert lines[0].startswith(f"meshcurv: error: tile {broken} of {src}: ")
+    assert lines[0].startswith(f"meshcurv: error: tile {broken} of {src}")
     assert lines[0].endswith(f"(finished tiles are kept in {out}.meshcurv-work; re-run to "
                              "resume)")
     assert not os.path.exists(out)

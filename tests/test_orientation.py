@@ -244,3 +244,16 @@ def test_tiled_runs_orient_as_the_untiled_one(client):
                                       equal_nan=name in ("k1", "k2", "normals")), name
         else:
             np.testing.assert_allclose(tiled.normals, untiled.normals, atol=1e-12)
+
+
+def test_tiles_whose_overlaps_disagree_are_flipped_to_agree():
+    """The vote between tiles still fixes a tile whose own propagation took the other side:
+    three tiles in a row, the middle one disagreeing with both neighbors."""
+    from scipy.sparse import csr_matrix
+
+    from meshcurv.tiled.orient import _agreeing_flips
+
+    votes = csr_matrix(np.array([[0.0, -40.0, 0.0], [-40.0, 0.0, -25.0], [0.0, -25.0, 0.0]]))
+    flips, n_groups, labels = _agreeing_flips(votes)
+    assert flips.tolist() == [1.0, -1.0, 1.0]
+    assert n_groups == 1 and labels.tolist() == [0, 0, 0]

@@ -145,8 +145,8 @@ def test_mst_orientation_agrees_across_tiles_and_with_the_untiled_run(client):
                                                return_report=True, **on(client))
     untiled = meshcurv.principal_curvatures(pts, radius=radius, orientation="mst")
     assert report.n_tiles == 16
-    # the tiles' own propagations disagree (each picks its side alone): some had to be flipped
-    assert set(report.flips.values()) == {-1, 1}
+    # each tile's own pieces are open and already turned towards +z: the votes agree with them
+    assert set(report.flips.values()) == {1}
     # one consistent side everywhere: the height field's normals all have nz of one sign
     nz = tiled.normals[:, 2][tiled.valid]
     assert (np.sign(nz) == np.sign(nz[0])).all()

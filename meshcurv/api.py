@@ -38,8 +38,8 @@ def estimate_normals(points, radius, progress=False):
     uses when it gets neither normals nor faces.
 
     A PCA plane fit over the ball of ``radius`` around each point, then signs propagated along
-    a minimum spanning tree (Hoppe et al. 1992) and each connected piece turned outward (see
-    :func:`meshcurv.normals.orient_mst`). For a subset whose balls lie inside ``points`` (a
+    a minimum spanning tree (Hoppe et al. 1992) and one sign per connected piece: outward if it
+    is closed, towards +z if it is open (see :func:`meshcurv.normals.orient.piece_signs`). For a subset whose balls lie inside ``points`` (a
     tile and its halo), the normals of the subset equal those of the whole cloud up to sign.
 
     Parameters

@@ -171,9 +171,12 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
     normals : (n, 3) float, optional
         Outward normals, used as given (normalised). Default: estimated, see
         ``Options.normal_estimation``.
-    radius : float or "auto", optional
+    radius : float, "auto" or list of floats, optional
         Neighborhood radius, model units. Default: the radius whose ball holds about 100
         points (:func:`meshcurv.neighbors.default_radius`; ~5 mean edge lengths).
+        A list ``[r1, r2, ...]`` estimates at every radius (multi-scale curvature) and returns
+        a list of results in that order; ball neighborhoods then come from one search over
+        the largest radius.
         "auto": one radius per mesh that balances the noise measured on the data against the
         circle model's bias (:func:`meshcurv.autoradius.auto_radius`; a few pilot runs on a
         sample of vertices). The radius used is ``result.radius``.
@@ -198,7 +201,7 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
 
     Returns
     -------
-    CurvatureResult
+    CurvatureResult (a list of them for a list of radii)
         ``k1, k2, d1, d2, normals, valid, status, mean, gaussian, shape_index, curvedness``, the
         diagnostics ``n_neighbors, n_samples, residual, noise`` (one row per vertex, or per
         query) and the ``radius`` used.
@@ -223,8 +226,35 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
     query = _check_query(query, len(v))
     if plan.viewpoint is not None:
         settings["orientation"] = plan.viewpoint
+    if _is_radius_list(radius):
+        radii = _check_radii(radius)
+        if all(power_of_two_scale(r) == 1.0 for r in radii):
+            return pipeline.run_radii(v, f, given_normals, radii, query, plan, progress)
+        return [_run_one(v, f, given_normals, r, query, plan, progress) for r in radii]
     radius = _resolve_radius(radius, v, f, given_normals, settings)
+    return _run_one(v, f, given_normals, radius, query, plan, progress)
+
+
+def _run_one(v, f, given_normals, radius, query, plan, progress):
+    """:func:`meshcurv.pipeline.run` at one radius, rescaled where its square would overflow."""
     scale = power_of_two_scale(radius)
     if scale != 1.0:
         return _run_rescaled(v, f, given_normals, radius, query, plan, progress, scale)
     return pipeline.run(v, f, given_normals, radius, query, plan, progress)
+
+
+def _is_radius_list(radius):
+    """Whether ``radius`` is a sequence of radii (list, tuple or 1-d array)."""
+    return isinstance(radius, (list, tuple)) or (isinstance(radius, np.ndarray) and radius.ndim)
+
+
+def _check_radii(radii):
+    """A non-empty list of positive finite float radii, else ValueError (one line)."""
+    try:
+        radii = [float(r) for r in radii]
+    except (TypeError, ValueError):
+        raise ValueError(f"radius must be a number, None, 'auto' or a list of numbers, "
+                         f"got {radii!r}") from None
+    if not radii:
+        raise ValueError("radius must not be an empty list")
+    return [_check_radius(r) for r in radii]

@@ -14,8 +14,8 @@ __all__ = ["Options", "OPTION_NAMES", "CHOICES", "ORIENTATIONS", "MAX_DIRECTIONS
 
 # Research switches of the estimator: the fields of Options, in order.
 SWITCH_NAMES = ("slab", "min_points", "min_spread", "weighting", "circle_normalization",
-                "section_blend", "robust", "half_frequency", "normal_estimation",
-                "refine_normals", "orientation")
+                "section_blend", "robust", "half_frequency", "bias_correction",
+                "normal_estimation", "refine_normals", "orientation")
 # Every option of principal_curvatures besides the data (vertices, faces, normals) and the
 # call's own arguments (options, query, progress): its three public knobs and the switches.
 OPTION_NAMES = ("radius", "n_directions", "neighborhood") + SWITCH_NAMES
@@ -117,6 +117,11 @@ class Options:
     half_frequency : bool, default False
         Add ``cos theta, sin theta`` terms (the paper's half-frequency fit, linear form) to
         absorb differences between opposite directions.
+    bias_correction : bool, default True
+        Remove the circle model's bias where the data are clean: a second fit over the
+        same neighbors within ``BIAS_RATIO * radius`` and the extrapolation of the shape
+        operator to radius 0 (the bias grows like radius^2), mixed in by the measured noise
+        like the weights (:func:`meshcurv.fit.extrapolate.extrapolate_to_zero`).
     normal_estimation : {"auto", "faces", "pca"}
         Used when ``normals`` is None. "faces": area-weighted face normals. "pca": normal of
         the least-squares plane through the same neighborhood, oriented by the faces if there
@@ -164,6 +169,7 @@ class Options:
     section_blend: bool = True
     robust: bool = True
     half_frequency: bool = False
+    bias_correction: bool = True
     normal_estimation: str = "auto"
     refine_normals: object = None
     orientation: object = "mst"
@@ -202,9 +208,10 @@ class Plan(NamedTuple):
     they are), "faces" (area-weighted face normals), "pca" (plane fits block by block, oriented
     like the face normals if there are faces, else towards ``viewpoint``, else towards +z) or
     "mst" (plane fits of all points first, oriented along a spanning tree). ``refine``:
-    quadric-refined normals.
-    ``weighting``: as the option. ``fit``: the fused kernel's settings ``(n_directions, slab,
-    min_points, min_spread, unit_norm, section_blend, half_frequency, robust)``, typed.
+    quadric-refined normals. ``weighting``: as the option. ``bias_correction``: as the option
+    (a second, smaller fit extrapolated to radius 0). ``fit``: the fused kernel's settings
+    ``(n_directions, slab, min_points, min_spread, unit_norm, section_blend, half_frequency,
+    robust)``, typed.
     """
 
     use_kring: bool
@@ -212,14 +219,15 @@ class Plan(NamedTuple):
     viewpoint: object
     refine: bool
     weighting: str
+    bias_correction: bool
     fit: tuple
 
 
 def resolve_plan(has_faces, has_normals, n_directions=8, neighborhood="auto", slab=0.25,
                  min_points=3, min_spread=0.25, weighting="auto",
                  circle_normalization="tangent", section_blend=True, robust=True,
-                 half_frequency=False, normal_estimation="auto", refine_normals=None,
-                 orientation="mst"):
+                 half_frequency=False, bias_correction=True, normal_estimation="auto",
+                 refine_normals=None, orientation="mst"):
     """The :class:`Plan` of a call with these options (the defaults of
     :func:`meshcurv.principal_curvatures`) on input with or without faces and given normals.
 
@@ -251,4 +259,5 @@ def resolve_plan(has_faces, has_normals, n_directions=8, neighborhood="auto", sl
            circle_normalization == "unit", bool(section_blend), bool(half_frequency),
            bool(robust))
     refine = not has_normals if refine_normals is None else bool(refine_normals)
-    return Plan(has_faces and neighborhood != "ball", normals, viewpoint, refine, weighting, fit)
+    return Plan(has_faces and neighborhood != "ball", normals, viewpoint, refine, weighting,
+                bool(bias_correction), fit)

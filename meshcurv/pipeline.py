@@ -13,15 +13,16 @@ from scipy.spatial import cKDTree
 from tqdm.auto import tqdm
 
 from .fit import fused, jet
+from .fit.extrapolate import BIAS_RATIO, extrapolate_to_zero
 from .neighbors import (BallGrid, KringWork, ball_counts, ball_grid, ball_neighbors,
                         edge_adjacency, kring_counts, kring_neighbors, spatial_order)
 from .normals import face_vertex_normals, orient, orient_along, orient_like, orient_mst, \
     orient_towards, pca_normals
 from .result import CurvatureResult
 
-__all__ = ["run", "estimate_normals", "weight_blend", "Search", "ball_search", "kring_search",
-           "block_size", "blocks", "mst_normals", "BLOCK", "BLOCK_ENTRIES", "MAX_PAIRS",
-           "NOISE_SCALE"]
+__all__ = ["run", "run_radii", "estimate_normals", "weight_blend", "clean_fraction", "Search",
+           "ball_search", "kring_search", "block_size", "blocks", "mst_normals", "BLOCK",
+           "BLOCK_ENTRIES", "MAX_PAIRS", "NOISE_SCALE", "BIAS_NOISE_SCALE"]
 
 # Query points per call into the kernels: bounds the memory of the neighbor lists (about
 # 0.8 kB per query point at 100 neighbors) at no measurable cost in speed.
@@ -32,15 +33,24 @@ BLOCK_ENTRIES = 2 ** 24
 # Most neighbor pairs (query points x neighbors) a call takes on: hours of work beyond.
 MAX_PAIRS = 1e11
 
-# Noise level (RMS height residual of the local cubic fit, as a fraction of the radius) at
-# which weighting="auto" mixes equal and distance weights half and half. Measured: clean
-# samples of the test surfaces stay below 0.09 % of the radius (Table 2 paraboloid 0.02 %,
-# torus 0.08 %), normal noise of 0.03 % of the bounding-box diagonal already gives 0.6-0.9 %,
+# Noise level (RMS height residual of the local jet, as a fraction of the radius) at which
+# weighting="auto" mixes equal and distance weights half and half. Measured: clean samples of
+# the test surfaces stay below 0.01 % of the radius (below 0.09 % with the cubic jet this was
+# set with: Table 2 paraboloid 0.02 %, torus 0.08 %), normal noise of 0.03 % of the bounding-box diagonal already gives 0.6-0.9 %,
 # and from there on equal weights are the more accurate.
 NOISE_SCALE = 2e-3
 
 # The direction of ``orientation="+z"``.
 _UP = np.array([0.0, 0.0, 1.0])
+# Noise level (as a fraction of the radius) at which the bias correction is applied half.
+# The correction adds the smaller fit's noise, amplified: about 6 sigma / radius^2 in
+# curvature (measured: the two fits' difference on noisy spheres, where there is no bias, has
+# variance ~130 sigma^2 / (r^4 N) for N points within the smaller radius r), against a bias of
+# 0.001-0.005 / radius at the test surfaces' usual radii - even at about 2-3e-4 of the radius.
+# The jet measures clean samples at 0.5e-5 .. 0.9e-4 of the radius (sphere, paraboloid,
+# torus), noise of 0.01 % of the diagonal at 1e-3 and more.
+BIAS_NOISE_SCALE = 2.5e-4
+
 # Neighbors per point in the graph of the spanning-tree orientation.
 _TREE_NEIGHBORS = 10
 
@@ -69,11 +79,20 @@ def _mix_normals(start, refined, beta):
         return mixed / np.linalg.norm(mixed, axis=1, keepdims=True)
 
 
+def clean_fraction(noise, scale):
+    """``1 / (1 + (noise / scale)^4)`` per vertex, in [0, 1]: 1 where the measured noise (model
+    units) is well below ``scale``, 0 well above it and where it is NaN (too few points)."""
+    noise = np.asarray(noise, dtype=np.float64)
+    with np.errstate(invalid="ignore", over="ignore"):
+        gain = 1.0 / (1.0 + (noise / scale) ** 4)
+    return np.where(np.isfinite(gain), gain, 0.0)
+
+
 def weight_blend(noise, radius, weighting="auto"):
     """Per-vertex mix of the circle fits' weight functions, in [0, 1] (1 = distance weights).
 
-    "auto": ``1 / (1 + (noise / (NOISE_SCALE * radius))^4)``, i.e. distance weights where the
-    local cubic fit explains the points (clean data: less bias), equal weights where it leaves
+    "auto": ``clean_fraction(noise, NOISE_SCALE * radius)``, i.e. distance weights where the
+    local jet explains the points (clean data: less bias), equal weights where it leaves
     noise (less variance); NaN noise (too few points for the fit) gives equal weights.
     """
     noise = np.asarray(noise, dtype=np.float64)
@@ -81,9 +100,7 @@ def weight_blend(noise, radius, weighting="auto"):
         return np.ones_like(noise)
     if weighting == "none":
         return np.zeros_like(noise)
-    with np.errstate(invalid="ignore"):
-        beta = 1.0 / (1.0 + (noise / (NOISE_SCALE * radius)) ** 4)
-    return np.where(np.isfinite(beta), beta, 0.0)
+    return clean_fraction(noise, NOISE_SCALE * radius)
 
 
 def blocks(order, progress, desc, size=BLOCK):
@@ -262,9 +279,26 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan):
     blend = beta if plan.weighting == "auto" else weight_blend(noise, radius, plan.weighting)
     fused.curvature_cga(search.points, xb, qb, indptr, indices, radius, blend, plan.fit,
                         (k1, k2, d1, d2, samples, residual, nbrs, status), search.rank)
+    if plan.bias_correction:
+        k1, k2, d1, d2 = _bias_corrected(search, xb, qb, indptr, indices, radius, blend, plan,
+                                         (k1, k2, d1, d2), noise)
     out.k1[pos], out.k2[pos], out.d1[pos], out.d2[pos] = k1, k2, d1, d2
     out.normals[pos], out.n_samples[pos], out.residual[pos] = qb, samples, residual
     out.n_neighbors[pos], out.noise[pos], out.status[pos] = nbrs, noise, status
+
+
+def _bias_corrected(search, xb, qb, indptr, indices, radius, blend, plan, large, noise):
+    """``large`` (k1, k2, d1, d2) at ``radius`` extrapolated to radius 0 with a second fit over
+    the same lists within ``BIAS_RATIO * radius`` (same normals and weight profile; the
+    half-frequency Euler model, which absorbs what a tilted normal does to opposite half-sets
+    of a smaller, more unevenly filled ball), mixed in by the measured ``noise``
+    (:func:`clean_fraction` at :data:`BIAS_NOISE_SCALE`)."""
+    b = len(xb)
+    small = tuple(np.empty(b) for _ in range(2)) + tuple(np.empty((b, 3)) for _ in range(2))
+    scratch = (np.empty(b), np.empty(b), np.empty(b), np.empty(b, dtype=np.int8))
+    fused.curvature_cga(search.points, xb, qb, indptr, indices, radius * BIAS_RATIO, blend,
+                        plan.fit[:6] + (True,) + plan.fit[7:], small + scratch, search.rank)
+    return extrapolate_to_zero(large, small, qb, clean_fraction(noise, BIAS_NOISE_SCALE * radius))
 
 
 def run(v, f, given_normals, radius, query, plan, progress=False):
@@ -281,26 +315,45 @@ def run(v, f, given_normals, radius, query, plan, progress=False):
     -------
     CurvatureResult with q rows
     """
+    return run_radii(v, f, given_normals, [radius], query, plan, progress)[0]
+
+
+def run_radii(v, f, given_normals, radii, query, plan, progress=False):
+    """:func:`run` at every radius of ``radii`` (floats, model units): a list of
+    CurvatureResult, one per radius in that order.
+
+    Ball neighborhoods come from one search over the largest radius, whose lists serve every
+    radius (each kernel keeps the neighbors within its own). k-rings are searched per radius:
+    the k-ring limited to a smaller ball is not the larger one cut to that ball.
+    """
+    what = "vertices" if f is not None else "points"
     if plan.use_kring:
-        finite, search = None, kring_search(v, f, radius)
+        finite = None
+        searches = [kring_search(v, f, r) for r in radii]
+        # work per query from a sample: smaller blocks for large balls, an error where infeasible
+        block = min(block_size(s, query, r, what) for s, r in zip(searches, radii))
     else:
         finite = np.flatnonzero(np.isfinite(v).all(axis=1))
-        search = ball_search(v, finite, radius)
-    # work per query from a sample: smaller blocks for large balls, an error for infeasible ones
-    block = block_size(search, query, radius, "vertices" if f is not None else "points")
-    nv, face_normals, note = _start_normals(v, f, given_normals, radius, search, finite, plan,
-                                            progress)
-    out = _Outputs(len(query))
+        shared = ball_search(v, finite, max(radii))
+        searches = [shared] * len(radii)
+        block = block_size(shared, query, max(radii), what)
+    starts = [_start_normals(v, f, given_normals, r, s, finite, plan, progress)
+              for s, r in zip(searches, radii)]
+    outs = [_Outputs(len(query)) for _ in radii]
     # queries by grid cell for ball queries (the points a block touches then stay in cache);
     # as given for k-rings, whose memory accesses follow the mesh's own numbering
-    order = len(query) if plan.use_kring else spatial_order(v[query], radius)
+    order = len(query) if plan.use_kring else spatial_order(v[query], max(radii))
     for pos in blocks(order, progress, "curvature", block):
         idx = query[pos]
         xb = v[idx]
-        indptr, indices = search.neighbors(idx)
-        qb = _block_normals(nv, face_normals, idx, xb, indptr, indices, radius, search, plan)
-        _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan)
-        del indptr, indices
-    res = out.result(radius)
-    res.orientation = note
-    return res
+        lists = None if plan.use_kring else shared.neighbors(idx)
+        for out, search, r, (nv, face_normals, _) in zip(outs, searches, radii, starts):
+            indptr, indices = search.neighbors(idx) if plan.use_kring else lists
+            qb = _block_normals(nv, face_normals, idx, xb, indptr, indices, r, search, plan)
+            _fit_block(out, pos, xb, qb, indptr, indices, r, search, plan)
+            del indptr, indices
+        del lists
+    results = [out.result(r) for out, r in zip(outs, radii)]
+    for res, (_, _, note) in zip(results, starts):
+        res.orientation = note
+    return results

@@ -1,5 +1,5 @@
-"""Local jet: cubic and quadric height fits around each point, for the noise level that steers
-the weights and a refined normal. Compiled kernel; its numpy specification is
+"""Local jet: quartic (cubic where too few points) and quadric height fits around each point,
+for the noise level that steers the weights and the bias correction, and a refined normal. Compiled kernel; its numpy specification is
 :func:`meshcurv.fit.jet_spec.local_jet`.
 """
 
@@ -10,12 +10,15 @@ from numba import njit, prange
 
 from ..linalg import CHUNK, ball_offset, solve_sym
 
-# Exponents (of u, of v) of the cubic height model's terms, in the order of its coefficients:
-# u^2, uv, v^2, u, v, 1, u^3, u^2 v, u v^2, v^3 (the quadric's first six).
-_JET_U = np.array([2, 1, 0, 1, 0, 0, 3, 2, 1, 0])
+# Exponents (of u, of v) of the quartic height model's terms, in the order of its coefficients:
+# u^2, uv, v^2, u, v, 1 (the quadric), u^3, u^2 v, u v^2, v^3 (the cubic's), u^4 .. v^4.
+_JET_U = np.array([2, 1, 0, 1, 0, 0, 3, 2, 1, 0, 4, 3, 2, 1, 0])
 
 
-_JET_V = np.array([0, 1, 2, 0, 1, 0, 0, 1, 2, 3])
+_JET_V = np.array([0, 1, 2, 0, 1, 0, 0, 1, 2, 3, 0, 1, 2, 3, 4])
+
+# Coefficients of the quadric, cubic and quartic height models (nested: leading blocks).
+_QUADRIC, _CUBIC, _QUARTIC = 6, 10, 15
 
 
 @njit(cache=True)
@@ -32,13 +35,14 @@ def _add_monomials(moments, c, u, v, degree):
 
 @njit(parallel=True, cache=True)
 def local_jet(points, query_points, normals, indptr, indices, radius, refine, noise):
-    """Local height fits around each query point: noise level (cubic) and normal (quadric).
+    """Local height fits around each query point: noise level (quartic) and normal (quadric).
 
     In a frame (tu, tv, n) around each query point x, the heights of its neighbors within
     ``radius`` are fitted by polynomials in (u, v) (least squares with weights
-    ``1 - r^2 / radius^2``, x included). The cubic fit's residual (10 coefficients) is what the
-    surface's shape up to third order cannot explain: on clean samples of smooth surfaces it
-    is below 0.1 % of the radius, with noise it is the noise. With ``refine`` the normal of the
+    ``1 - r^2 / radius^2``, x included). The quartic fit's residual (15 coefficients; the
+    cubic's, 10, where 11-15 points are all there is) is what the surface's shape up to fourth
+    order cannot explain: on clean samples of smooth surfaces it is about 0.01 % of the radius
+    (the cubic's up to 0.13 %: a torus's fourth-order terms), with noise it is the noise. With ``refine`` the normal of the
     fitted quadric (6 coefficients; the cubic's gradient at x has 3-5x its variance under
     noise) at x, ``n - g_u tu - g_v tv`` normalised, replaces n: face and PCA normals tilt with
     irregular sampling (0.7 degrees on a randomly sampled sphere at ~100 neighbors), the
@@ -50,22 +54,24 @@ def local_jet(points, query_points, normals, indptr, indices, radius, refine, no
     normals : (m, 3) float64, unit; refined in place when ``refine``
     indptr, indices : CSR neighbor lists into ``points``; radius : float, model units
     refine : bool
-    noise : (m,) float64 output, RMS height residual of the cubic fit (model units, corrected
-        for the 10 fitted coefficients); NaN where the fit is singular (fewer than 11
-        well-spread points), and there the normal is left unchanged - as it is where the
-        quadric would tilt it by more than 30 degrees (no graph over n, e.g. at a crease).
+    noise : (m,) float64 output, RMS height residual of the quartic fit, or of the cubic where
+        the quartic is singular (model units, corrected for the fitted coefficients); NaN where
+        both are (fewer than 11 well-spread points), and there the normal is left unchanged -
+        as it is where the quadric would tilt it by more than 30 degrees (no graph over n,
+        e.g. at a crease).
     """
     m = query_points.shape[0]
     r2max = radius * radius
     inv_r = 1.0 / radius
     nchunks = (m + CHUNK - 1) // CHUNK
     for c in prange(nchunks):
-        mat = np.empty((10, 10))
-        quad = np.empty((6, 6))
-        rhs = np.empty(10)
-        sol = np.empty(10)
-        mom = np.empty((7, 7))
-        hmom = np.empty((7, 7))
+        mat = np.empty((_QUARTIC, _QUARTIC))
+        cub = np.empty((_CUBIC, _CUBIC))
+        quad = np.empty((_QUADRIC, _QUADRIC))
+        rhs = np.empty(_QUARTIC)
+        sol = np.empty(_QUARTIC)
+        mom = np.empty((9, 9))
+        hmom = np.empty((9, 9))
         for q in range(c * CHUNK, min(m, (c + 1) * CHUNK)):
             noise[q] = np.nan
             n0 = normals[q, 0]
@@ -88,10 +94,10 @@ def local_jet(points, query_points, normals, indptr, indices, radius, refine, no
             b0 = n1 * t2 - n2 * t1
             b1 = n2 * t0 - n0 * t2
             b2 = n0 * t1 - n1 * t0
-            # power moments: mom[a, b] = sum w u^a v^b (a + b <= 6), hmom[a, b] = sum w h u^a v^b
-            # (a + b <= 3); every entry of the normal equations is one of them
-            for a in range(7):
-                for b in range(7):
+            # power moments: mom[a, b] = sum w u^a v^b (a + b <= 8), hmom[a, b] = sum w h u^a v^b
+            # (a + b <= 4); every entry of the normal equations is one of them
+            for a in range(9):
+                for b in range(9):
                     mom[a, b] = 0.0
                     hmom[a, b] = 0.0
             sw = 1.0
@@ -106,27 +112,32 @@ def local_jet(points, query_points, normals, indptr, indices, radius, refine, no
                 v = qx * b0 + qy * b1 + qz * b2
                 h = qx * n0 + qy * n1 + qz * n2
                 w = 1.0 - r2
-                _add_monomials(mom, w, u, v, 6)
-                _add_monomials(hmom, w * h, u, v, 3)
+                _add_monomials(mom, w, u, v, 8)
+                _add_monomials(hmom, w * h, u, v, 4)
                 sw += w
                 swhh += w * h * h
                 count += 1
-            for a in range(10):
+            for a in range(_QUARTIC):
                 rhs[a] = hmom[_JET_U[a], _JET_V[a]]
                 for cc in range(a + 1):
                     mat[a, cc] = mom[_JET_U[a] + _JET_U[cc], _JET_V[a] + _JET_V[cc]]
             mat[5, 5] += 1.0         # x itself: u = v = h = 0, weight 1
-            for a in range(6):             # the quadric's normal equations: the leading block
+            for a in range(_CUBIC):        # the cubic's and the quadric's: the leading blocks
                 for cc in range(a + 1):
-                    quad[a, cc] = mat[a, cc]
-            if count <= 10 or not solve_sym(mat, rhs, 10, sol):
-                continue
+                    cub[a, cc] = mat[a, cc]
+                    if a < _QUADRIC:
+                        quad[a, cc] = mat[a, cc]
+            npar = _QUARTIC
+            if count <= _QUARTIC or not solve_sym(mat, rhs, _QUARTIC, sol):
+                npar = _CUBIC
+                if count <= _CUBIC or not solve_sym(cub, rhs, _CUBIC, sol):
+                    continue
             # weighted residual sum of squares of the least-squares fit: sum w h^2 - sol . rhs
             ss = swhh
-            for a in range(10):
+            for a in range(npar):
                 ss -= sol[a] * rhs[a]
-            noise[q] = math.sqrt(max(ss, 0.0) / sw * count / (count - 10)) * radius
-            if not refine or not solve_sym(quad, rhs, 6, sol):
+            noise[q] = math.sqrt(max(ss, 0.0) / sw * count / (count - npar)) * radius
+            if not refine or not solve_sym(quad, rhs, _QUADRIC, sol):
                 continue
             if sol[3] * sol[3] + sol[4] * sol[4] > 1.0 / 3.0:
                 continue

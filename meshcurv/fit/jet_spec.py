@@ -1,5 +1,5 @@
-"""Numpy specification of the local jet (:mod:`meshcurv.fit.jet`): cubic and quadric height
-fits around one point, for its noise level and refined normal."""
+"""Numpy specification of the local jet (:mod:`meshcurv.fit.jet`): quartic (cubic) and
+quadric height fits around one point, for its noise level and refined normal."""
 
 import numpy as np
 
@@ -7,7 +7,7 @@ __all__ = ["local_jet"]
 
 
 def local_jet(x, n, neighbors, radius):
-    """Cubic and quadric height fits around x (:func:`meshcurv.fit.jet.local_jet` in numpy).
+    """Quartic (cubic) and quadric height fits around x (:func:`meshcurv.fit.jet.local_jet` in numpy).
 
     Parameters
     ----------
@@ -19,8 +19,9 @@ def local_jet(x, n, neighbors, radius):
     -------
     normal : (3,) float, unit normal of the fitted quadric at x, on n's side; n itself when a
         fit is singular or the quadric would tilt it by more than 30 degrees
-    noise : float, RMS height residual of the cubic fit, model units, corrected for its 10
-        coefficients; NaN when the fit is singular
+    noise : float, RMS height residual of the quartic fit (15 coefficients), or of the cubic
+        (10) where the quartic is singular or 15 points are all there is, model units,
+        corrected for the coefficients; NaN when both are singular
     """
     x = np.asarray(x, dtype=np.float64)
     n = np.asarray(n, dtype=np.float64)
@@ -33,14 +34,19 @@ def local_jet(x, n, neighbors, radius):
     q = np.vstack([np.zeros(3), q[(d2 > 0) & (d2 <= radius * radius)] / radius])  # x included
     u, v, h = q @ tu, q @ tv, q @ n
     design = np.column_stack([u * u, u * v, v * v, u, v, np.ones_like(u),
-                              u ** 3, u * u * v, u * v * v, v ** 3])
+                              u ** 3, u * u * v, u * v * v, v ** 3,
+                              u ** 4, u ** 3 * v, u * u * v * v, u * v ** 3, v ** 4])
     w = 1 - np.einsum("ij,ij->i", q, q)
     w[0] = 1.0
     lhs = design.T @ (w[:, None] * design)
-    if len(q) <= 10 or np.linalg.matrix_rank(lhs) < 10:
+    for npar in (15, 10):
+        if len(q) > npar and np.linalg.matrix_rank(lhs[:npar, :npar]) == npar:
+            break
+    else:
         return n, np.nan
-    coef = np.linalg.solve(lhs, design.T @ (w * h))
-    noise = np.sqrt(np.sum(w * (h - design @ coef) ** 2) / w.sum() * len(q) / (len(q) - 10))
+    coef = np.linalg.solve(lhs[:npar, :npar], design[:, :npar].T @ (w * h))
+    noise = np.sqrt(np.sum(w * (h - design[:, :npar] @ coef) ** 2) / w.sum() * len(q)
+                    / (len(q) - npar))
     coef = np.linalg.solve(lhs[:6, :6], design[:, :6].T @ (w * h))   # the quadric
     if coef[3] ** 2 + coef[4] ** 2 > 1 / 3:
         return n, noise * radius

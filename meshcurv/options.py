@@ -15,7 +15,7 @@ __all__ = ["Options", "OPTION_NAMES", "CHOICES", "MAX_DIRECTIONS", "check_option
 # Research switches of the estimator: the fields of Options, in order.
 SWITCH_NAMES = ("slab", "min_points", "min_spread", "weighting", "circle_normalization",
                 "section_blend", "robust", "half_frequency", "normal_estimation",
-                "refine_normals", "orientation")
+                "refine_normals", "orientation", "normal_fit")
 # Every option of principal_curvatures besides the data (vertices, faces, normals) and the
 # call's own arguments (options, query, progress): its three public knobs and the switches.
 OPTION_NAMES = ("radius", "n_directions", "neighborhood") + SWITCH_NAMES
@@ -24,7 +24,8 @@ OPTION_NAMES = ("radius", "n_directions", "neighborhood") + SWITCH_NAMES
 CHOICES = {"neighborhood": ("auto", "kring", "ball"),
            "normal_estimation": ("auto", "faces", "pca"),
            "weighting": ("auto", "distance", "none"),
-           "circle_normalization": ("tangent", "unit")}
+           "circle_normalization": ("tangent", "unit"),
+           "normal_fit": ("auto", "sphere", "quadric")}
 
 # Most planes through the normal (``n_directions``). Each kernel thread holds 2 x that many
 # half-set accumulators and the robust step sorts the 2 x n_directions circle fits by insertion
@@ -128,11 +129,22 @@ class Options:
         :func:`meshcurv.pipeline.weight_blend`, whatever ``weighting`` is): face and PCA normals
         tilt with irregular sampling (0.7 degrees on a random sphere, up to 3 % in
         curvature), the quadric's normal does not but is noisier. None: refine estimated
-        normals, use given ones as they are; True: refine given normals too; False: never.
+        normals; keep given ones, except where the data disagree with them by more than the
+        measured noise explains, where they are mixed with the fitted normal
+        (:func:`meshcurv.pipeline.check_given_normals`); True: refine given normals like
+        estimated ones; False: never.
     orientation : "mst" or (3,) array-like
         Global orientation of estimated point-cloud normals: "mst" propagates along a minimum
         spanning tree and then turns each connected piece away from its own centroid; a (3,)
         point orients every normal towards it (a scanner position).
+    normal_fit : {"auto", "sphere", "quadric"}, default "auto"
+        The fit that refines normals (``refine_normals``). "quadric": the local jet's quadric
+        height fit (:func:`meshcurv.fit.jet.local_jet`). "sphere": the Pratt-normalised
+        algebraic sphere/plane fit of the paper's section 4
+        (:func:`meshcurv.normals.sphere.sphere_normals`), exact on spheres and planes
+        whatever the sampling, but tilted where the shape is far from a sphere. "auto": the
+        two mixed per vertex by how much of the sphere fit's residual is noise
+        (:func:`meshcurv.pipeline.sphericity`).
 
     Examples
     --------
@@ -155,6 +167,7 @@ class Options:
     normal_estimation: str = "auto"
     refine_normals: object = None
     orientation: object = "mst"
+    normal_fit: str = "auto"
 
     def __post_init__(self):
         check_options(**self.as_dict())
@@ -189,7 +202,9 @@ class Plan(NamedTuple):
     ``use_kring``: k-ring neighborhoods (else ball queries). ``normals``: "given" (used as
     they are), "faces" (area-weighted face normals), "pca" (plane fits block by block, oriented
     like the face normals if there are faces, else towards ``viewpoint``) or "mst" (plane fits
-    of all points first, oriented along a spanning tree). ``refine``: quadric-refined normals.
+    of all points first, oriented along a spanning tree). ``refine``: refined normals, by the
+    fit ``normal_fit`` ("auto", "sphere" or "quadric"). ``check_given``: given normals kept except where
+    the data disagree with them (``refine_normals=None``).
     ``weighting``: as the option. ``fit``: the fused kernel's settings ``(n_directions, slab,
     min_points, min_spread, unit_norm, section_blend, half_frequency, robust)``, typed.
     """
@@ -200,13 +215,15 @@ class Plan(NamedTuple):
     refine: bool
     weighting: str
     fit: tuple
+    normal_fit: str = "auto"
+    check_given: bool = False
 
 
 def resolve_plan(has_faces, has_normals, n_directions=8, neighborhood="auto", slab=0.25,
                  min_points=3, min_spread=0.25, weighting="auto",
                  circle_normalization="tangent", section_blend=True, robust=True,
                  half_frequency=False, normal_estimation="auto", refine_normals=None,
-                 orientation="mst"):
+                 orientation="mst", normal_fit="auto"):
     """The :class:`Plan` of a call with these options (the defaults of
     :func:`meshcurv.principal_curvatures`) on input with or without faces and given normals.
 
@@ -221,7 +238,7 @@ def resolve_plan(has_faces, has_normals, n_directions=8, neighborhood="auto", sl
     orientation = check_options(neighborhood=neighborhood, normal_estimation=normal_estimation,
                                 orientation=orientation, weighting=weighting,
                                 circle_normalization=circle_normalization,
-                                n_directions=n_directions)
+                                n_directions=n_directions, normal_fit=normal_fit)
     if neighborhood == "kring" and not has_faces:
         raise ValueError("neighborhood='kring' needs faces")
     if normal_estimation == "faces" and not has_normals and not has_faces:
@@ -237,4 +254,5 @@ def resolve_plan(has_faces, has_normals, n_directions=8, neighborhood="auto", sl
            circle_normalization == "unit", bool(section_blend), bool(half_frequency),
            bool(robust))
     refine = not has_normals if refine_normals is None else bool(refine_normals)
-    return Plan(has_faces and neighborhood != "ball", normals, viewpoint, refine, weighting, fit)
+    return Plan(has_faces and neighborhood != "ball", normals, viewpoint, refine, weighting, fit,
+                normal_fit, has_normals and refine_normals is None)

@@ -117,7 +117,8 @@ def sphere_normals_csr(points, query_points, indptr, indices, radius, with_query
     ``residual`` (m,) output, NaN with the normal: the fit's RMS residual in units of the
     radius, ``sqrt(min U^T M U / sum w)`` corrected for its 4 degrees of freedom (Pratt's
     normalisation makes the algebraic distances geometric to first order); noise and the
-    shape's departure from a sphere alike.
+    shape's departure from a sphere alike. Being the square root of an eigenvalue it bottoms
+    out at about 1e-8 (round-off) on exact spheres and planes.
 
     ``tilt_gain`` (m,) output, NaN with the normal: ``sqrt(2 sum w^2 r^2) / sum w r^2`` over
     the ball (r in units of the radius): independent height noise of s radii tilts a weighted

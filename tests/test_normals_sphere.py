@@ -1,7 +1,7 @@
 """Sphere-fit normals (meshcurv.normals.sphere): the kernel agrees with its numpy
 specification, is exact on spheres and planes, and in the estimator makes curvature on a
 clean sphere cloud exact with its own normals; given normals are refined where noisy and kept
-bit for bit where exact."""
+bit for bit where exact (``refine_normals="auto"``)."""
 
 import numpy as np
 import pytest
@@ -137,7 +137,8 @@ def _noisy_normals(normals, sigma, seed):
 
 def test_exact_given_normals_are_kept_bit_for_bit():
     s = surfaces.sphere(sampling="random", n=6000, seed=4, radius=2.0)
-    res = meshcurv.principal_curvatures(s.vertices, normals=s.normals, radius=0.4)
+    res = meshcurv.principal_curvatures(s.vertices, normals=s.normals, radius=0.4,
+                                        refine_normals="auto")
     kept = meshcurv.principal_curvatures(s.vertices, normals=s.normals, radius=0.4,
                                          refine_normals=False)
     assert np.array_equal(res.normals, kept.normals)
@@ -158,7 +159,7 @@ def test_noisy_given_normals_are_refined_and_the_curvature_improves():
     kept = meshcurv.principal_curvatures(t.vertices, normals=noisy, radius=0.3,
                                          neighborhood="ball", refine_normals=False)
     res = meshcurv.principal_curvatures(t.vertices, normals=noisy, radius=0.3,
-                                        neighborhood="ball")
+                                        neighborhood="ball", refine_normals="auto")
     ang_kept = np.mean(_sine(kept.normals, t.normals))
     ang = np.mean(_sine(res.normals, t.normals))
     assert ang < 0.2 * ang_kept
@@ -170,7 +171,12 @@ def test_noisy_given_normals_are_refined_and_the_curvature_improves():
 def test_exact_given_normals_on_noisy_positions_are_kept():
     t = surfaces.add_normal_noise(surfaces.torus(n_major=200, n_minor=50), 0.002, seed=6)
     res = meshcurv.principal_curvatures(t.vertices, normals=t.normals, radius=0.4,
-                                        neighborhood="ball")
+                                        neighborhood="ball", refine_normals="auto")
     kept = meshcurv.principal_curvatures(t.vertices, normals=t.normals, radius=0.4,
                                          neighborhood="ball", refine_normals=False)
     assert np.array_equal(res.normals, kept.normals)
+
+
+def test_refine_normals_takes_only_its_documented_values():
+    with pytest.raises(ValueError, match="refine_normals must be"):
+        meshcurv.principal_curvatures(np.zeros((10, 3)), radius=1.0, refine_normals="yes")

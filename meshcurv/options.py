@@ -148,7 +148,11 @@ class Options:
         (:func:`meshcurv.normals.sphere.sphere_normals`), exact on spheres and planes
         whatever the sampling, but tilted where the shape is far from a sphere. "auto": the
         two mixed per vertex by how much of the sphere fit's residual is noise
-        (:func:`meshcurv.pipeline.sphericity`).
+        (:func:`meshcurv.pipeline.sphericity`). Measured (own normals, clean clouds): random
+        sphere mean relative |dk| 6e-5 with "quadric", 5e-10 with "sphere" and "auto";
+        paraboloid 2.7e-3 / 1.5e-2 / 2.7e-3, benchmark torus 3.8e-3 / 4.7e-3 / 3.8e-3,
+        Goursat 1.8e-2 / 1.9e-2 / 1.8e-2; with position noise all three alike (the noise
+        mix then keeps the PCA normal).
 
     Examples
     --------

@@ -211,8 +211,8 @@ class Plan(NamedTuple):
     they are), "faces" (area-weighted face normals), "pca" (plane fits block by block, oriented
     like the face normals if there are faces, else towards ``viewpoint``) or "mst" (plane fits
     of all points first, oriented along a spanning tree). ``refine``: refined normals, by the
-    fit ``normal_fit`` ("auto", "sphere" or "quadric"). ``check_given``: given normals kept except where
-    the data disagree with them (``refine_normals="auto"``).
+    fit ``normal_fit`` ("auto", "sphere" or "quadric"). ``check_given``: given normals kept
+    except where the data disagree with them (``refine_normals="auto"``).
     ``weighting``: as the option. ``fit``: the fused kernel's settings ``(n_directions, slab,
     min_points, min_spread, unit_norm, section_blend, half_frequency, robust)``, typed.
     """

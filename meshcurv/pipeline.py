@@ -128,16 +128,17 @@ def given_normal_noise(v, given, radius, search, query, size=GIVEN_SAMPLE):
     shows.
 
     For a vertex i, a neighbor j at about half the radius (:func:`_partners`: far enough
-    that the points' noise tilts the chord little, near enough for the chord's third-order
-    term to stay small) and the unit chord ``c = (x_j - x_i) / |x_j - x_i|``
-    the chord is at right angles to the mean of the two exact normals up to second order in
-    the distance (the symmetry of a circle), so with given normals ``g = t + xi``
-    ``e_g = (g_i + g_j) . c`` is ``(xi_i + xi_j) . c`` (variance ``2 a2``) plus what the
-    points' own noise puts in ``c``; ``e_f`` of the normals fitted to the points
+    that the points' noise tilts the chord little, near enough for the chord's second-order
+    term to stay small) and the unit chord ``c = (x_j - x_i) / |x_j - x_i|``, the chord is at
+    right angles to the mean of the two exact normals up to second order in the distance
+    (the symmetry of a circle), so with given normals ``g = t + xi`` ``e_g = (g_i + g_j) . c``
+    is ``(xi_i + xi_j) . c`` (variance ``2 a2``) plus what the points' own noise puts in
+    ``c``; ``e_f`` of the normals fitted to the points
     (:func:`meshcurv.normals.sphere.sphere_normals`, smooth) holds the same position term
     and twice their bias along c instead, provided they are fitted without x_i and x_j
-    (else they follow the two points' noise and make the chord look right). The estimate is the mean of
-    ``(e_g^2 - e_f^2) / 2`` over the sample, kept only where it exceeds three standard errors:
+    (else they follow the two points' noise and make the chord look right). The estimate is
+    the mean of ``(e_g^2 - e_f^2) / 2`` over the sample, kept only where it exceeds three
+    standard errors:
     exact given normals get 0 (their ``e_g`` is the smaller), and with it the given normals
     stay as they are bit for bit; the fits' bias and noise only lower the estimate.
     """

@@ -96,19 +96,18 @@ def _partners(v, sample, radius, search):
     whose distance is nearest to half the radius (vertex indices), those without one dropped."""
     indptr, indices = search.neighbors(sample)
     row = np.repeat(np.arange(len(sample)), np.diff(indptr))
-    dist = np.linalg.norm(search.points[indices] - v[sample][row], axis=1)
+    d = search.points[indices] - v[sample][row]
+    dist = np.sqrt(np.einsum("ij,ij->i", d, d))
     off = np.where(dist > 0, np.abs(dist - 0.5 * radius), np.inf)
-    order = np.lexsort((off, row))
-    first = order[np.searchsorted(row[order], np.arange(len(sample)))] if len(row) else \
-        np.zeros(0, dtype=np.int64)
     has = np.diff(indptr) > 0
-    first = first[has[:len(first)]] if len(first) == len(sample) else first
-    sample = sample[has]
-    good = np.isfinite(off[first])
-    partner = indices[first][good]
+    best = np.full(len(sample), np.inf)
+    best[has] = np.minimum.reduceat(off, indptr[:-1][has])
+    hit = np.flatnonzero((off == best[row]) & np.isfinite(off))
+    rows, first = np.unique(row[hit], return_index=True)    # the first such entry per row
+    partner = indices[hit[first]]
     if search.rank is not None:
         partner = search.rank[partner]
-    return sample[good], partner
+    return sample[rows], partner
 
 
 def _without_pair(search, rows, others):

@@ -132,3 +132,56 @@ def ball_offset(points, k, x0, x1, x2, r2max, inv_r):
     qz = points[k, 2] - x2
     d2 = qx * qx + qy * qy + qz * qz
     return d2 > 0.0 and d2 <= r2max, qx * inv_r, qy * inv_r, qz * inv_r, d2 * inv_r * inv_r
+
+
+@njit(cache=True)
+def sym_eig_jacobi(a, vecs, npar):
+    """Eigen-decomposition of the symmetric ``a[:npar, :npar]`` by cyclic Jacobi rotations.
+
+    ``a`` is overwritten: its diagonal holds the eigenvalues (unsorted) and the columns of
+    ``vecs[:npar, :npar]`` the unit eigenvectors in the same order. Converges quadratically to
+    machine precision (the small eigenvalues of a positive semi-definite matrix to round-off
+    of the large ones).
+    """
+    for i in range(npar):
+        for j in range(npar):
+            vecs[i, j] = 1.0 if i == j else 0.0
+    for sweep in range(60):
+        off = 0.0
+        diag = 0.0
+        for i in range(npar):
+            diag += a[i, i] * a[i, i]
+            for j in range(i + 1, npar):
+                off += a[i, j] * a[i, j]
+        if off <= 1e-36 * diag or off == 0.0:
+            break
+        for p in range(npar - 1):
+            for q in range(p + 1, npar):
+                apq = a[p, q]
+                if apq == 0.0:
+                    continue
+                # rotation angle that zeroes a[p, q] (Golub & Van Loan, sym.schur2)
+                tau = (a[q, q] - a[p, p]) / (2.0 * apq)
+                if tau >= 0.0:
+                    t = 1.0 / (tau + math.sqrt(1.0 + tau * tau))
+                else:
+                    t = -1.0 / (-tau + math.sqrt(1.0 + tau * tau))
+                c = 1.0 / math.sqrt(1.0 + t * t)
+                s = t * c
+                for k in range(npar):          # columns p, q: a <- a J
+                    akp = a[k, p]
+                    akq = a[k, q]
+                    a[k, p] = c * akp - s * akq
+                    a[k, q] = s * akp + c * akq
+                for k in range(npar):          # rows p, q: a <- J^T a
+                    apk = a[p, k]
+                    aqk = a[q, k]
+                    a[p, k] = c * apk - s * aqk
+                    a[q, k] = s * apk + c * aqk
+                a[p, q] = 0.0
+                a[q, p] = 0.0
+                for k in range(npar):
+                    vkp = vecs[k, p]
+                    vkq = vecs[k, q]
+                    vecs[k, p] = c * vkp - s * vkq
+                    vecs[k, q] = s * vkp + c * vkq

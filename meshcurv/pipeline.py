@@ -17,12 +17,13 @@ from .fit.extrapolate import BIAS_RATIO, extrapolate_to_zero
 from .neighbors import (BallGrid, KringWork, ball_counts, ball_grid, ball_neighbors,
                         edge_adjacency, kring_counts, kring_neighbors, spatial_order)
 from .normals import face_vertex_normals, orient, orient_along, orient_like, orient_mst, \
-    orient_towards, pca_normals
+    orient_towards, pca_normals, sphere_normals
 from .result import CurvatureResult
 
-__all__ = ["run", "run_radii", "estimate_normals", "weight_blend", "clean_fraction", "Search",
-           "ball_search", "kring_search", "block_size", "blocks", "mst_normals", "BLOCK",
-           "BLOCK_ENTRIES", "MAX_PAIRS", "NOISE_SCALE", "BIAS_NOISE_SCALE"]
+__all__ = ["run", "run_radii", "estimate_normals", "weight_blend", "clean_fraction",
+           "given_normal_noise", "mix_given_normals", "Search", "ball_search", "kring_search",
+           "block_size", "blocks", "mst_normals", "BLOCK", "BLOCK_ENTRIES", "MAX_PAIRS",
+           "NOISE_SCALE", "BIAS_NOISE_SCALE", "GIVEN_SAMPLE"]
 
 # Query points per call into the kernels: bounds the memory of the neighbor lists (about
 # 0.8 kB per query point at 100 neighbors) at no measurable cost in speed.
@@ -50,6 +51,10 @@ _UP = np.array([0.0, 0.0, 1.0])
 # The jet measures clean samples at 0.5e-5 .. 0.9e-4 of the radius (sphere, paraboloid,
 # torus), noise of 0.01 % of the diagonal at 1e-3 and more.
 BIAS_NOISE_SCALE = 2.5e-4
+
+# Vertices sampled to estimate the noise of given normals (:func:`given_normal_noise`): its
+# standard error is then about 2 % of the estimate.
+GIVEN_SAMPLE = 4096
 
 # Neighbors per point in the graph of the spanning-tree orientation.
 _TREE_NEIGHBORS = 10
@@ -86,6 +91,117 @@ def clean_fraction(noise, scale):
     with np.errstate(invalid="ignore", over="ignore"):
         gain = 1.0 / (1.0 + (noise / scale) ** 4)
     return np.where(np.isfinite(gain), gain, 0.0)
+
+def sphericity(noise, residual):
+    """Per-vertex weight in [0, 1] of the sphere fit's normal against the quadric's: the
+    fraction ``min(1, noise^2 / residual^2)`` of the sphere fit's residual (both RMS, in units
+    of the radius) that the local cubic fit's residual ``noise`` also leaves, i.e. that is
+    noise and not the shape's departure from a sphere or plane. 1 on spheres and planes
+    (where the sphere fit is exact and the quadric's normal tilts with the sampling), towards 0
+    on anisotropic shapes (paraboloid, torus), 0 where either is NaN."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        w = np.minimum(1.0, noise * noise / (residual * residual))
+    return np.where(np.isfinite(w), w, np.where(residual == 0.0, 1.0, 0.0))
+
+
+def _oriented_like(fitted, start):
+    """``fitted`` (b, 3) unit normals turned to ``start``'s side; ``start`` where NaN."""
+    flip = np.einsum("ij,ij->i", fitted, start) < 0
+    fitted = np.where(flip[:, None], -fitted, fitted)
+    return np.where(np.isfinite(fitted).all(axis=1)[:, None], fitted, start)
+
+
+def _partners(v, sample, radius, search):
+    """``(sample, partner)``: for each vertex of ``sample`` (k,) the neighbor in its list
+    whose distance is nearest to half the radius (vertex indices), those without one dropped."""
+    indptr, indices = search.neighbors(sample)
+    row = np.repeat(np.arange(len(sample)), np.diff(indptr))
+    d = search.points[indices] - v[sample][row]
+    dist = np.sqrt(np.einsum("ij,ij->i", d, d))
+    off = np.where(dist > 0, np.abs(dist - 0.5 * radius), np.inf)
+    has = np.diff(indptr) > 0
+    best = np.full(len(sample), np.inf)
+    best[has] = np.minimum.reduceat(off, indptr[:-1][has])
+    hit = np.flatnonzero((off == best[row]) & np.isfinite(off))
+    rows, first = np.unique(row[hit], return_index=True)    # the first such entry per row
+    partner = indices[hit[first]]
+    if search.rank is not None:
+        partner = search.rank[partner]
+    return sample[rows], partner
+
+
+def _without_pair(search, rows, others):
+    """The search's CSR lists of the vertices ``rows`` (k,) without the vertices ``others``
+    (k,): each row's list less its partner (the query itself is left out by the fits)."""
+    indptr, indices = search.neighbors(rows)
+    owner = np.repeat(np.arange(len(rows)), np.diff(indptr))
+    vertex = indices if search.rank is None else search.rank[indices]
+    keep = vertex != others[owner]
+    counts = np.bincount(owner[keep], minlength=len(rows))
+    return np.concatenate([[0], np.cumsum(counts)]).astype(indptr.dtype), indices[keep]
+
+
+def given_normal_noise(v, given, radius, search, query, size=GIVEN_SAMPLE):
+    """Variance per tangent component (radians^2) of the independent noise on the given
+    normals (n, 3), estimated from up to ``size`` of the vertices ``query``; 0.0 where none
+    shows.
+
+    For a vertex i, a neighbor j at about half the radius (:func:`_partners`: far enough
+    that the points' noise tilts the chord little, near enough for the chord's second-order
+    term to stay small) and the unit chord ``c = (x_j - x_i) / |x_j - x_i|``, the chord is at
+    right angles to the mean of the two exact normals up to second order in the distance
+    (the symmetry of a circle), so with given normals ``g = t + xi`` ``e_g = (g_i + g_j) . c``
+    is ``(xi_i + xi_j) . c`` (variance ``2 a2``) plus what the points' own noise puts in
+    ``c``; ``e_f`` of the normals fitted to the points
+    (:func:`meshcurv.normals.sphere.sphere_normals`, smooth) holds the same position term
+    and twice their bias along c instead, provided they are fitted without x_i and x_j
+    (else they follow the two points' noise and make the chord look right). The estimate is
+    the mean of ``(e_g^2 - e_f^2) / 2`` over the sample, kept only where it exceeds three
+    standard errors:
+    exact given normals get 0 (their ``e_g`` is the smaller), and with it the given normals
+    stay as they are bit for bit; the fits' bias and noise only lower the estimate.
+    """
+    sample = query[_sample_queries(len(query), size)]
+    sample = sample[np.isfinite(given[sample]).all(axis=1) & np.isfinite(v[sample]).all(axis=1)]
+    if len(sample) < 8:
+        return 0.0
+    sample, near = _partners(v, sample, radius, search)
+    both = np.concatenate([sample, near])
+    indptr, indices = _without_pair(search, both, np.concatenate([near, sample]))
+    fitted, _, _ = sphere_normals(search.points, v[both], indptr, indices, radius,
+                                  with_query=False)
+    fitted = _oriented_like(fitted, given[both])   # NaN given normals leave NaN
+    with np.errstate(invalid="ignore", divide="ignore"):
+        unit = given[both] / np.linalg.norm(given[both], axis=1, keepdims=True)
+        chord = v[near] - v[sample]
+        chord /= np.linalg.norm(chord, axis=1, keepdims=True)
+        k = len(sample)
+        e_given = np.einsum("ij,ij->i", unit[:k] + unit[k:], chord)
+        e_fitted = np.einsum("ij,ij->i", fitted[:k] + fitted[k:], chord)
+        excess = 0.5 * (e_given ** 2 - e_fitted ** 2)
+    excess = excess[np.isfinite(excess)]
+    if len(excess) < 8:
+        return 0.0
+    a2 = float(np.mean(excess))
+    return a2 if a2 > 3.0 * float(np.std(excess)) / np.sqrt(len(excess)) else 0.0
+
+
+def mix_given_normals(given, fitted, tilt_gain, noise, radius, a2):
+    """Given unit normals (b, 3) mixed with fitted ones (b, 3, on the given side) by inverse
+    variances: ``given + lambda (fitted - given)``, normalised, with
+    ``lambda = a2 / (a2 + c2)``, ``a2`` the given normals' noise variance per tangent
+    component (:func:`given_normal_noise`) and ``c2 = (tilt_gain noise / radius)^2`` the fitted
+    normal's (``tilt_gain`` from :func:`meshcurv.normals.sphere.sphere_normals`, ``noise`` the
+    local jet's RMS height residual, model units). ``a2 = 0``, or a NaN fit or noise, keeps the
+    given normal bit for bit.
+    """
+    with np.errstate(invalid="ignore", divide="ignore"):
+        c2 = (tilt_gain * noise / radius) ** 2
+        lam = a2 / (a2 + c2) if a2 > 0 else np.zeros(len(given))
+        lam = np.where(np.isfinite(lam) & np.isfinite(fitted).all(axis=1), lam, 0.0)
+        mixed = given + lam[:, None] * (fitted - given)
+        mixed /= np.linalg.norm(mixed, axis=1, keepdims=True)
+    return np.where((lam > 0)[:, None], mixed, given)
 
 
 def weight_blend(noise, radius, weighting="auto"):
@@ -264,13 +380,25 @@ class _Outputs:
                                status=self.status)
 
 
-def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan):
-    """Local jet (noise, refined normal) and the fused fits of one block, into ``out[pos]``."""
+def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2=0.0):
+    """Local jet (noise, refined normal) and the fused fits of one block, into ``out[pos]``.
+    ``given_a2``: the noise variance of given normals (:func:`given_normal_noise`)."""
     b = len(xb)
     noise = np.empty(b)
     start = qb.copy() if plan.refine else None
-    jet.local_jet(search.points, xb, qb, indptr, indices, radius, plan.refine, noise)
+    jet.local_jet(search.points, xb, qb, indptr, indices, radius,
+                  plan.refine and plan.normal_fit != "sphere", noise)
     beta = weight_blend(noise, radius, "auto")
+    by_sphere = plan.refine and plan.normal_fit != "quadric"
+    if by_sphere or given_a2 > 0:
+        fitted, residual, tilt_gain = sphere_normals(search.points, xb, indptr, indices, radius)
+        fitted = _oriented_like(fitted, qb)
+        if not by_sphere:
+            qb = mix_given_normals(qb, fitted, tilt_gain, noise, radius, given_a2)
+        elif plan.normal_fit == "sphere":
+            qb = fitted
+        else:
+            qb = _mix_normals(qb, fitted, sphericity(noise / radius, residual))
     if plan.refine:
         qb = _mix_normals(start, qb, beta)
     k1, k2, residual, samples, nbrs = (np.empty(b) for _ in range(5))
@@ -340,6 +468,8 @@ def run_radii(v, f, given_normals, radii, query, plan, progress=False):
     starts = [_start_normals(v, f, given_normals, r, s, finite, plan, progress)
               for s, r in zip(searches, radii)]
     outs = [_Outputs(len(query)) for _ in radii]
+    given_a2 = [given_normal_noise(v, start[0], r, s, query) if plan.check_given else 0.0
+                for s, r, start in zip(searches, radii, starts)]
     # queries by grid cell for ball queries (the points a block touches then stay in cache);
     # as given for k-rings, whose memory accesses follow the mesh's own numbering
     order = len(query) if plan.use_kring else spatial_order(v[query], max(radii))
@@ -347,10 +477,11 @@ def run_radii(v, f, given_normals, radii, query, plan, progress=False):
         idx = query[pos]
         xb = v[idx]
         lists = None if plan.use_kring else shared.neighbors(idx)
-        for out, search, r, (nv, face_normals, _) in zip(outs, searches, radii, starts):
+        for out, search, r, (nv, face_normals, _), a2 in zip(outs, searches, radii, starts,
+                                                              given_a2):
             indptr, indices = search.neighbors(idx) if plan.use_kring else lists
             qb = _block_normals(nv, face_normals, idx, xb, indptr, indices, r, search, plan)
-            _fit_block(out, pos, xb, qb, indptr, indices, r, search, plan)
+            _fit_block(out, pos, xb, qb, indptr, indices, r, search, plan, a2)
             del indptr, indices
         del lists
     results = [out.result(r) for out, r in zip(outs, radii)]

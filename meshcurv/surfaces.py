@@ -11,8 +11,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import Delaunay
 
-__all__ = ["Surface", "paraboloid", "monkey_saddle", "sphere", "cylinder", "torus",
-           "add_normal_noise", "orient_faces"]
+__all__ = ["Surface", "paraboloid", "monkey_saddle", "sphere", "ellipsoid", "cylinder", "torus",
+           "torus_at", "goursat_function", "goursat_at", "implicit_curvature",
+           "project_to_implicit", "add_normal_noise", "orient_faces"]
 
 
 @dataclass
@@ -174,6 +175,34 @@ def sphere(radius=1.0, subdivisions=5, sampling="regular", n=10000, seed=0):
                    nan3.copy(), np.full(len(v), np.inf))
 
 
+def ellipsoid(semi_axes=(2.0, 1.5, 1.0), subdivisions=5, sampling="regular", n=10000, seed=0):
+    """Ellipsoid x^2/a^2 + y^2/b^2 + z^2/c^2 = 1: the points of a unit icosphere (or ``n``
+    uniform random points of the unit sphere, hull faces) scaled by the semi-axes (a, b, c),
+    so the sampling is denser where the ellipsoid is narrower.
+
+    Exact outward normals, k1 >= k2 > 0 and directions from the implicit function
+    (:func:`implicit_curvature`); at the end of an axis the curvatures are the axis over the
+    squares of the other two (e.g. a/b^2 and a/c^2 at (a, 0, 0)).
+
+    Examples
+    --------
+    >>> s = ellipsoid(subdivisions=1)
+    >>> s.vertices.shape, bool(np.all(s.k1 >= s.k2)), float(s.k1.max()) <= 2 / 1.0 ** 2
+    ((42, 3), True, True)
+    >>> r = ellipsoid((0.5, 0.5, 0.5), subdivisions=1)     # a sphere: k = 1 / 0.5 everywhere
+    >>> bool(np.allclose(r.k1, 2.0) and np.allclose(r.k2, 2.0))
+    True
+    """
+    axes = np.asarray(semi_axes, dtype=np.float64)
+    unit = sphere(1.0, subdivisions, sampling, n, seed)
+    v = unit.vertices * axes
+    normals, k1, k2, d1, d2 = implicit_curvature(2 * v / axes ** 2,
+                                                 np.broadcast_to(np.diag(2 / axes ** 2),
+                                                                 (len(v), 3, 3)))
+    return Surface("ellipsoid", v, orient_faces(v, unit.faces, normals), normals, k1, k2, d1,
+                   d2, np.full(len(v), np.inf))
+
+
 def cylinder(radius=1.0, height=4.0, n_around=200, n_along=None):
     """Open cylinder around the z axis: k1 = 1 / radius around, k2 = 0 along the axis."""
     if n_along is None:
@@ -206,6 +235,130 @@ def torus(major=2.0, minor=0.5, n_major=240, n_minor=60):
     faces = orient_faces(v, _grid_faces(n_major, n_minor, wrap_u=True, wrap_v=True), normals)
     return Surface("torus", v, faces, normals, np.full(len(v), 1.0 / minor),
                    np.cos(ww) / ring, d1, d2, np.full(len(v), np.inf))
+
+
+def torus_at(points, major=6.0, minor=2.0):
+    """Exact geometry of the torus around the z axis at the points of it nearest ``points``.
+
+    ``points`` (n, 3) near the torus (e.g. samples written to a few digits, or noisy ones) are
+    projected onto it along the line through the tube's centre circle; the returned
+    :class:`Surface` (no faces, ``border_distance`` inf) holds the projected points and, as in
+    :func:`torus`, k1 = 1 / minor and k2 = cos v / (major + minor cos v), v the angle around
+    the tube (0 on the outer equator).
+
+    Examples
+    --------
+    >>> s = torus_at([[8.0, 0.0, 0.0], [0.0, 4.1, 0.0], [6.0, 0.0, 2.0]])
+    >>> s.vertices[1].tolist(), s.k1.tolist(), s.k2.round(6).tolist()
+    ([0.0, 4.0, 0.0], [0.5, 0.5, 0.5], [0.125, -0.25, 0.0])
+    """
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    rho = np.hypot(p[:, 0], p[:, 1])
+    around = np.column_stack([p[:, 0] / rho, p[:, 1] / rho, np.zeros(len(p))])
+    normals = _unit(p - major * around)
+    cos_v, sin_v = np.einsum("ij,ij->i", normals, around), normals[:, 2]
+    v = major * around + minor * normals
+    d1 = -sin_v[:, None] * around + cos_v[:, None] * np.array([0.0, 0.0, 1.0])
+    d2 = np.cross(normals, d1)
+    return Surface("torus", v, np.zeros((0, 3), np.int64), normals, np.full(len(p), 1.0 / minor),
+                   cos_v / (major + minor * cos_v), d1, d2, np.full(len(p), np.inf))
+
+
+def implicit_curvature(gradient, hessian):
+    """Exact normals, principal curvatures and directions of an implicit surface F = 0.
+
+    The shape operator is ``P Hess(F) P / |grad F|`` with P the projector onto the tangent
+    plane; with the normal ``grad F / |grad F|`` (outward where F grows outward) it is convex
+    positive. Directions are NaN at umbilics.
+
+    Parameters
+    ----------
+    gradient : (n, 3) float, grad F at points of F = 0
+    hessian : (n, 3, 3) float, Hess F there
+
+    Returns
+    -------
+    normals (n, 3), k1 (n,), k2 (n,), d1 (n, 3), d2 (n, 3); k1 >= k2, (d1, d2, normals)
+    right-handed.
+
+    Examples
+    --------
+    Unit sphere F = |x|^2 - 1 at (0, 0, 1): grad 2x, Hess 2 I.
+
+    >>> n, k1, k2, d1, d2 = implicit_curvature([[0.0, 0.0, 2.0]], [2.0 * np.eye(3)])
+    >>> n.tolist(), k1.tolist(), k2.tolist(), bool(np.isnan(d1).all())
+    ([[0.0, 0.0, 1.0]], [1.0], [1.0], True)
+    """
+    g = np.asarray(gradient, dtype=np.float64).reshape(-1, 3)
+    h = np.asarray(hessian, dtype=np.float64).reshape(-1, 3, 3)
+    norm = np.linalg.norm(g, axis=1)
+    normals = g / norm[:, None]
+    # a tangent basis (t1, t2): any axis not near the normal, made orthogonal to it
+    axis = np.where((np.abs(normals[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+    t1 = _unit(axis - np.einsum("ij,ij->i", axis, normals)[:, None] * normals)
+    t2 = np.cross(normals, t1)
+
+    def form(a, b):
+        return np.einsum("ni,nij,nj->n", a, h, b) / norm
+
+    s11, s12, s22 = form(t1, t1), form(t1, t2), form(t2, t2)
+    half_tr = 0.5 * (s11 + s22)
+    disc = np.hypot(0.5 * (s11 - s22), s12)
+    k1, k2 = half_tr + disc, half_tr - disc
+    theta = 0.5 * np.arctan2(2 * s12, s11 - s22)
+    d1 = np.cos(theta)[:, None] * t1 + np.sin(theta)[:, None] * t2
+    d1[disc <= 1e-12 * np.maximum(1.0, np.abs(half_tr))] = np.nan
+    return normals, k1, k2, d1, np.cross(normals, d1)
+
+
+def project_to_implicit(points, function, steps=50):
+    """Points (n, 3) moved onto F = 0 by Newton steps along grad F (for points near the
+    surface, e.g. samples written to a few digits or noisy ones). ``function(points)`` returns
+    (F (n,), grad F (n, 3), Hess F (n, 3, 3)), like :func:`goursat_function`."""
+    x = np.array(points, dtype=np.float64).reshape(-1, 3)
+    for _ in range(steps):
+        f, g, _ = function(x)
+        step = (f / np.einsum("ij,ij->i", g, g))[:, None] * g
+        x -= step
+        if np.all(np.abs(step) <= 1e-15 * (1.0 + np.abs(x))):
+            break
+    return x
+
+
+def goursat_function(points, a=0.03, b=-2.0, c=-8.0):
+    """Goursat's surface F = a (x^4 + y^4 + z^4) + b (x^2 + y^2 + z^2) + c (default: the
+    benchmark surface of Lachaud et al. 2023, about [-9.66, 9.66]^3; F > 0 outside).
+
+    Returns F (n,), grad F (n, 3), Hess F (n, 3, 3) at ``points`` (n, 3).
+    """
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    f = a * np.sum(p ** 4, axis=1) + b * np.sum(p ** 2, axis=1) + c
+    g = 4 * a * p ** 3 + 2 * b * p
+    h = np.zeros((len(p), 3, 3))
+    h[:, [0, 1, 2], [0, 1, 2]] = 12 * a * p ** 2 + 2 * b
+    return f, g, h
+
+
+def goursat_at(points, a=0.03, b=-2.0, c=-8.0):
+    """Exact geometry of Goursat's surface (:func:`goursat_function`) at the points of it
+    nearest ``points`` (n, 3): a :class:`Surface` without faces holding the projected points.
+
+    Examples
+    --------
+    On the x axis the surface is umbilic: k = 2 b / |4 a x^3 + 2 b x| (concave, b < 0).
+
+    >>> s = goursat_at([[8.4, 0.0, 0.0]])
+    >>> x = s.vertices[0, 0]
+    >>> bool(np.isclose(s.k1[0], -4 / (0.12 * x ** 3 - 4 * x))), bool(s.k1[0] == s.k2[0])
+    (True, True)
+    """
+    def function(x):
+        return goursat_function(x, a, b, c)
+
+    v = project_to_implicit(points, function)
+    normals, k1, k2, d1, d2 = implicit_curvature(*function(v)[1:])
+    return Surface("goursat", v, np.zeros((0, 3), np.int64), normals, k1, k2, d1, d2,
+                   np.full(len(v), np.inf))
 
 
 def add_normal_noise(surface, sigma_fraction, seed=0):

@@ -18,6 +18,19 @@ Usage::
     python scripts/compare_meshlab.py --quick    # smaller meshes, about a minute of CPU time
     python scripts/compare_meshlab.py --smallest --out /tmp/cmp   # the test-suite configuration
 
+Accuracy cases against exact curvature, one group or all (``all`` at full size with the default
+methods and options writes docs/accuracy_cases.md; anything else a temporary folder or --out)::
+
+    python scripts/compare_meshlab.py --accuracy-cases all
+    python scripts/compare_meshlab.py --accuracy-cases cnc --methods meshcurv
+    python scripts/compare_meshlab.py --accuracy-cases surfaces,spikes --option weighting=none
+
+Groups: ``surfaces`` (clean and noisy torus, paraboloid, ellipsoid, cylinder K = 0; meshes),
+``cnc`` (the six clouds of ../shared/bench/cnc under the paper's noise grid, mean |dH|, with
+their README's CNC figures beside), ``density`` (one-sided half sphere, density falling 25x),
+``icosahedra`` (subdivisions 0-2), ``spikes`` (sphere with 2 % scanner spikes). MeshLab runs
+on the mesh groups only.
+
 Sign and label normalisation (all methods are brought to meshcurv's convention: outward normal,
 convex positive, k1 >= k2); measured on a sphere and a torus with outward-wound faces:
 
@@ -177,8 +190,10 @@ def current_defaults():
     import meshcurv
 
     params = inspect.signature(meshcurv.principal_curvatures).parameters
+    options = meshcurv.Options()
     names = ("weighting", "normal_estimation", "slab", "n_directions", "robust")
-    return ", ".join(f"`{n}={params[n].default!r}`" for n in names if n in params)
+    return ", ".join(f"`{n}={params[n].default if n in params else getattr(options, n)!r}`"
+                     for n in names if n in params or hasattr(options, n))
 
 
 def run_meshcurv(vertices, faces, radius, **settings):
@@ -476,6 +491,591 @@ def _reindex(faces, used):
     """Faces renumbered onto the used vertices only (APSS gets the referenced points)."""
     new = np.cumsum(used) - 1
     return new[faces]
+
+
+# ---------------------------------------------------------------------------------------------
+# Accuracy cases (--accuracy-cases): one group at a time, each against exact curvature
+# ---------------------------------------------------------------------------------------------
+
+ACCURACY_GROUPS = ("surfaces", "cnc", "density", "icosahedra", "spikes")
+MESHLAB_NAMES = tuple(MESHLAB_METHODS)
+
+# CNC reference: mean |H - H_true| over the six clouds, the authors' code (Avg-Hexagram,
+# K nearest neighbours), from ../shared/bench/cnc/README.md; keys (sigma_eps, sigma_xi).
+CNC_REFERENCE = {(0.0, 0.0): (0.0012, 0.0017), (0.0, 0.1): (0.067, 0.026),
+                 (0.1, 0.0): (0.022, 0.0088), (0.1, 0.1): (0.079, 0.028),
+                 (0.2, 0.2): (0.160, 0.056)}
+CNC_NOISE = (0.0, 0.1, 0.2)
+CNC_FILES = ("goursat_010000", "goursat_025000", "goursat_050000",
+             "torus_010000", "torus_025000", "torus_050000")
+
+# Seeds of the generated noise, spikes and samplings (fixed: reruns give the same points).
+SEED_CNC, SEED_DENSITY, SEED_SPIKES = 2023, 25, 13
+
+
+def find_cnc_dir():
+    """The benchmark clouds' folder: ``$MESHCURV_CNC_DIR``, else ``shared/bench/cnc`` beside
+    the repository or beside one of its parent folders; None when absent."""
+    env = os.environ.get("MESHCURV_CNC_DIR")
+    if env:
+        return env
+    d = ROOT
+    while True:
+        cand = os.path.join(os.path.dirname(d), "shared", "bench", "cnc")
+        if os.path.isdir(cand):
+            return cand
+        if os.path.dirname(d) == d:
+            return None
+        d = os.path.dirname(d)
+
+
+def load_cnc_cloud(path):
+    """One cloud of the CNC benchmark: (points (n, 3), exact normals (n, 3), truth Surface).
+
+    Read with :func:`meshcurv.io.xyz.read_xyz` (``x y z nx ny nz``; the '#' first line, whose
+    column names are wrong, is skipped); the truth is the exact geometry at each point's
+    projection onto the surface (:func:`meshcurv.surfaces.torus_at` with R 6, r 2, or
+    :func:`meshcurv.surfaces.goursat_at`), named by the file's name.
+    """
+    from meshcurv import surfaces
+    from meshcurv.io.xyz import read_xyz
+
+    data = read_xyz(path)
+    name = os.path.basename(path)
+    if name.startswith("torus"):
+        truth = surfaces.torus_at(data.vertices, 6.0, 2.0)
+    elif name.startswith("goursat"):
+        truth = surfaces.goursat_at(data.vertices)
+    else:
+        raise ValueError(f"{name}: not a cloud of the CNC benchmark (torus_* or goursat_*)")
+    return data.vertices, data.normals, truth
+
+
+def noisy_positions(points, sigma, seed):
+    """The paper's position noise: a copy of ``points`` + N(0, sigma^2) per coordinate
+    (absolute units)."""
+    noise = np.random.default_rng(seed).normal(scale=sigma, size=points.shape) if sigma else 0
+    return points + noise
+
+
+def noisy_normals(normals, sigma, seed):
+    """The paper's normal noise: n + N(0, sigma^2 I), renormalised (a copy)."""
+    n = normals + (np.random.default_rng(seed).normal(scale=sigma, size=normals.shape)
+                   if sigma else 0)
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+def _selected(methods, group_has_mesh=True):
+    """The methods of ``methods`` that run on a group (MeshLab's only on meshes)."""
+    return [m for m in methods if m == "meshcurv" or (group_has_mesh and m in MESHLAB_NAMES)]
+
+
+def _dk(k1, k2, t1, t2):
+    """Per-vertex errors: mean (|dk1| + |dk2|) / 2 and worst max(|dk1|, |dk2|); NaN where no
+    estimate."""
+    e1, e2 = np.abs(k1 - t1), np.abs(k2 - t2)
+    return 0.5 * (e1 + e2), np.fmax(e1, e2) + np.where(np.isnan(e1) | np.isnan(e2), np.nan, 0)
+
+
+def _curvature_row(k1, k2, truth, mask):
+    """% valid (finite estimate), mean / max of |dk| over the valid rows of ``mask``."""
+    mean_dk, max_dk = _dk(k1[mask], k2[mask], truth.k1[mask], truth.k2[mask])
+    ok = np.isfinite(mean_dk)
+    return dict(n=int(mask.sum()), valid=float(ok.mean()) if ok.size else np.nan,
+                mean_dk=float(mean_dk[ok].mean()) if ok.any() else np.nan,
+                max_dk=float(max_dk[ok].max()) if ok.any() else np.nan)
+
+
+def _run(method, v, f, radius, switches, timeout, normals=None):
+    """One method on one input: dict(k1, k2, seconds, status, radius, valid_flags)."""
+    import meshcurv
+
+    if method == "meshcurv":
+        t0 = time.perf_counter()
+        res = meshcurv.principal_curvatures(v, f, normals=normals, radius=radius, **switches)
+        return dict(k1=res.k1, k2=res.k2, seconds=time.perf_counter() - t0, status="ok",
+                    radius=res.radius, valid=res.valid)
+    r = run_meshlab(method, v, np.zeros((0, 3), np.int64) if f is None else f, radius,
+                    timeout=timeout)
+    return {**r, "radius": radius if method in ("SDQF", "APSS") else None,
+            "valid": np.isfinite(r["k1"]) & np.isfinite(r["k2"])}
+
+
+def _mesh_surfaces(size):
+    """(name, Surface, radius or None = meshcurv's default, noise levels) of group surfaces."""
+    from meshcurv import surfaces as S
+
+    cyl = S.cylinder(1.0, height=np.pi, n_around=32, n_along=17)   # 32 x 16 square quads
+    if size == "smallest":
+        return [("torus", S.torus(2.0, 0.5, 60, 15), 0.6, (0.0, 0.003)),
+                ("paraboloid", S.paraboloid(spacing=0.5), 2.0, (0.0,)),
+                ("ellipsoid", S.ellipsoid((2.0, 1.5, 1.0), 3), 0.6, (0.0,)),
+                ("cylinder 32x16", cyl, None, (0.0,))]
+    return [("torus", S.torus(2.0, 0.5, 240, 60), 0.3, NOISE_LEVELS),
+            ("paraboloid", S.paraboloid(spacing=0.2), 2.0, (0.0,)),
+            ("ellipsoid", S.ellipsoid((2.0, 1.5, 1.0), 5), 0.3, (0.0,)),
+            ("cylinder 32x16", cyl, None, (0.0,))]
+
+
+def group_surfaces(methods, size, switches, timeout, **_):
+    """Clean and noisy torus, clean paraboloid, ellipsoid and cylinder meshes (faces given);
+    errors over the vertices at least one radius from a border; on the cylinder also
+    max |K| / k1^2 (exact K = 0, k1 the exact 1 / radius)."""
+    from meshcurv.neighbors import default_radius
+    from meshcurv.surfaces import add_normal_noise
+
+    rows = []
+    for name, surf, radius, noise_levels in _mesh_surfaces(size):
+        radius = float(default_radius(surf.vertices)) if radius is None else radius
+        for noise in noise_levels:
+            m = add_normal_noise(surf, noise, seed=1) if noise > 0 else surf
+            mask = m.border_distance >= radius
+            for method in _selected(methods):
+                r = _run(method, m.vertices, m.faces, radius, switches, timeout)
+                row = dict(group="surfaces", case=f"{name}, {len(m.vertices)} vertices",
+                           noise=noise, method=method,
+                           radius=r["radius"], seconds=r["seconds"], status=r["status"],
+                           **_curvature_row(r["k1"], r["k2"], m, mask))
+                if name.startswith("cylinder"):
+                    # |K| / k1^2 at least one radius from the border and off its two rings
+                    kk = np.abs(r["k1"] * r["k2"]) / m.k1 ** 2
+                    for key, where in (("max_K_over_k1sq", mask),
+                                       ("max_K_over_k1sq_off_border", m.border_distance > 0)):
+                        row[key] = float(np.nanmax(kk[where])) if np.isfinite(
+                            kk[where]).any() else np.nan
+                rows.append(row)
+                print(f"surfaces {name} noise {noise * 100:.1f} % {method}: mean |dk| "
+                      f"{row['mean_dk']:.4g}", flush=True)
+    return rows
+
+
+def group_cnc(methods, size, switches, timeout, cnc_dir=None, **_):
+    """The six CNC clouds under the paper's noise grid: mean |H - H_true| per file, for
+    meshcurv given the noisy normals and given none, at its default radius and at the radius
+    whose ball holds ~50 points (CNC's K = 50)."""
+    from meshcurv.neighbors import default_radius
+
+    if "meshcurv" not in methods:
+        return []
+    cnc_dir = cnc_dir or find_cnc_dir()
+    if cnc_dir is None or not os.path.isdir(cnc_dir):
+        raise FileNotFoundError("the CNC benchmark clouds were not found; pass --cnc-dir "
+                                "(or set MESHCURV_CNC_DIR) to the folder of the .pts files")
+    files = CNC_FILES[::3] if size == "smallest" else CNC_FILES
+    grid = [(0.1, 0.1)] if size == "smallest" else [
+        (se, sx) for se in CNC_NOISE for sx in CNC_NOISE]
+    import meshcurv
+
+    rows = []
+    for fi, name in enumerate(files):
+        points, normals, truth = load_cnc_cloud(os.path.join(cnc_dir, name + ".pts"))
+        if size == "smallest":
+            keep = np.sort(np.random.default_rng(0).choice(len(points), 2000, replace=False))
+            points, normals = points[keep], normals[keep]
+            truth = truth_rows(truth, keep)
+        h_true = 0.5 * (truth.k1 + truth.k2)
+        positions_done = set()
+        for se, sx in grid:
+            # the same noisy positions for every sigma_xi, the same normal noise for every
+            # sigma_eps: "no normals" runs once per sigma_eps
+            p = noisy_positions(points, se, SEED_CNC + 100 * fi + round(10 * se))
+            n = noisy_normals(normals, sx, SEED_CNC + 100 * fi + 50 + round(10 * sx))
+            r50 = float(default_radius(p, target_neighbors=50))
+            modes = [("normals", n, sx)]
+            if se not in positions_done:
+                modes.append(("no normals", None, None))
+                positions_done.add(se)
+            for mode, given, sigma_xi in modes:
+                for rule, radius in (("default", None), ("~50 points", r50)):
+                    t0 = time.perf_counter()
+                    res = meshcurv.principal_curvatures(p, normals=given, radius=radius,
+                                                        **switches)
+                    dh = np.abs(res.mean - h_true)
+                    ok = np.isfinite(dh)
+                    rows.append(dict(group="cnc", file=name, sigma_eps=se, sigma_xi=sigma_xi,
+                                     method=f"meshcurv, {mode}", radius_rule=rule,
+                                     radius=res.radius, n=len(p),
+                                     median_neighbors=float(np.median(res.n_neighbors)),
+                                     mean_dH=float(dh[ok].mean()) if ok.any() else np.nan,
+                                     valid=float(ok.mean()),
+                                     seconds=time.perf_counter() - t0, status="ok"))
+            print(f"cnc {name} sigma_eps {se} sigma_xi {sx}: " + ", ".join(
+                f"{r['method']} ({r['radius_rule']}) {r['mean_dH']:.4g}" for r in rows[-4:]),
+                flush=True)
+    return rows
+
+
+def truth_rows(surface, rows):
+    """The exact fields of ``surface`` (a cloud without faces) at the indices ``rows``."""
+    return type(surface)(surface.name, surface.vertices[rows], surface.faces,
+                         surface.normals[rows], surface.k1[rows], surface.k2[rows],
+                         surface.d1[rows], surface.d2[rows], surface.border_distance[rows])
+
+
+def half_sphere_variable_density(n=10000, falloff=25.0, seed=SEED_DENSITY):
+    """About ``n`` points of the upper half (z > 0) of the unit sphere whose density falls
+    ``falloff`` times from x = -1 to x = 1 (exponentially in x; uniform points kept with
+    probability falloff^(-(x + 1) / 2)): a one-sided scan seen from +z. Exact k1 = k2 = 1 and
+    outward normals; a :class:`meshcurv.surfaces.Surface` without faces."""
+    from meshcurv.surfaces import Surface
+
+    rng = np.random.default_rng(seed)
+    # acceptance: x is uniform on the sphere, so the mean of falloff^-t over t in [0, 1]
+    accept = (1 - 1 / falloff) / np.log(falloff)
+    u = rng.normal(size=(int(np.ceil(n / accept)), 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    u[:, 2] = np.abs(u[:, 2])
+    u = u[rng.uniform(size=len(u)) < falloff ** (-(u[:, 0] + 1) / 2)]
+    ones, nan3 = np.ones(len(u)), np.full((len(u), 3), np.nan)
+    return Surface("half sphere", u, np.zeros((0, 3), np.int64), u.copy(), ones, ones.copy(),
+                   nan3, nan3.copy(), u[:, 2].copy())
+
+
+def group_density(methods, size, switches, timeout, **_):
+    """One-sided variable-density cloud (half unit sphere, density falling 25x): % valid and
+    max |dk| over all points, for meshcurv without normals (default radius and "auto") and
+    with the exact normals."""
+    if "meshcurv" not in methods:
+        return []
+    s = half_sphere_variable_density(2000 if size == "smallest" else 10000)
+    everywhere = np.ones(len(s.vertices), dtype=bool)
+    rows = []
+    for label, normals, radius in (("meshcurv, no normals", None, None),
+                                   ("meshcurv, no normals, radius auto", None, "auto"),
+                                   ("meshcurv, exact normals", s.normals, None)):
+        r = _run("meshcurv", s.vertices, None, radius, switches, timeout, normals=normals)
+        rows.append(dict(group="density", case=f"half sphere, {len(s.vertices)} points",
+                         method=label, radius=r["radius"], seconds=r["seconds"],
+                         status=r["status"], **_curvature_row(r["k1"], r["k2"], s, everywhere)))
+        print(f"density {label}: valid {rows[-1]['valid']:.4f}, max |dk| "
+              f"{rows[-1]['max_dk']:.4g}", flush=True)
+    return rows
+
+
+def group_icosahedra(methods, size, switches, timeout, **_):
+    """Icosahedra of subdivision 0-2 (12, 42, 162 vertices, unit radius; k = 1): % valid and
+    max |dk| over the valid rows, meshcurv on the mesh and on its points alone; MeshLab on the
+    mesh, SDQF and APSS at meshcurv's radius."""
+    import trimesh
+
+    from meshcurv.neighbors import default_radius
+    from meshcurv.surfaces import Surface
+
+    rows = []
+    for sub in (0, 1, 2):
+        ico = trimesh.creation.icosphere(subdivisions=sub, radius=1.0)
+        v = np.asarray(ico.vertices, dtype=np.float64)
+        v /= np.linalg.norm(v, axis=1, keepdims=True)
+        f = np.asarray(ico.faces, dtype=np.int64)
+        ones = np.ones(len(v))
+        truth = Surface("icosphere", v, f, v, ones, ones, v * np.nan, v * np.nan, ones * np.inf)
+        everywhere = np.ones(len(v), dtype=bool)
+        ball = float(default_radius(v))     # meshcurv's default radius, for SDQF and APSS
+        runs = [("meshcurv", "meshcurv, mesh", f), ("meshcurv", "meshcurv, points", None)] \
+            if "meshcurv" in methods else []
+        runs += [(m, m, f) for m in _selected(methods) if m != "meshcurv"]
+        for method, label, faces in runs:
+            r = _run(method, v, faces, None if method == "meshcurv" else ball, switches,
+                     timeout)
+            rows.append(dict(group="icosahedra", case=f"subdivision {sub} ({len(v)} vertices)",
+                             method=label, radius=r["radius"], seconds=r["seconds"],
+                             status=r["status"], **_curvature_row(r["k1"], r["k2"], truth,
+                                                                  everywhere)))
+        print(f"icosahedra {sub}: " + ", ".join(
+            f"{r['method']} valid {r['valid']:.2f} max {r['max_dk']:.3g}"
+            for r in rows[-len(runs):]), flush=True)
+    return rows
+
+
+def sphere_with_spikes(subdivisions=5, noise=0.0005, spike_share=0.02, spike_range=(0.01, 0.04),
+                       seed=SEED_SPIKES):
+    """An icosphere (unit radius) with Gaussian noise along the normal (``noise`` x the
+    bounding-box diagonal) and ``spike_share`` of its vertices pushed out or in along the
+    normal by a uniform ``spike_range`` x the diagonal: (Surface, spike mask (n,) bool).
+    The exact curvature stays k = 1 everywhere."""
+    from meshcurv.surfaces import add_normal_noise, sphere
+
+    s = add_normal_noise(sphere(1.0, subdivisions), noise, seed=seed)
+    rng = np.random.default_rng(seed + 1)
+    n = len(s.vertices)
+    spikes = np.zeros(n, dtype=bool)
+    spikes[rng.choice(n, int(round(spike_share * n)), replace=False)] = True
+    push = rng.uniform(*spike_range, spikes.sum()) * rng.choice([-1.0, 1.0], spikes.sum())
+    s.vertices = s.vertices.copy()
+    s.vertices[spikes] += (push * s.diagonal)[:, None] * s.normals[spikes]
+    return s, spikes
+
+
+def group_spikes(methods, size, switches, timeout, **_):
+    """Sphere with scanner spikes: error on the vertices that are not spikes at R 0.3 (mean
+    |dk| and share off by more than 10 %, an invalid row counted as off) and the share of the
+    spikes meshcurv marks invalid; mesh and cloud path, MeshLab at the same radius."""
+    s, spikes = sphere_with_spikes(3 if size == "smallest" else 5)
+    radius = 0.6 if size == "smallest" else 0.3
+    good = ~spikes
+    rows = []
+    runs = [("meshcurv", "meshcurv, mesh", s.faces), ("meshcurv", "meshcurv, points", None)] \
+        if "meshcurv" in methods else []
+    runs += [(m, m, s.faces) for m in _selected(methods) if m != "meshcurv"]
+    for method, label, faces in runs:
+        r = _run(method, s.vertices, faces, radius, switches, timeout)
+        _, worst = _dk(r["k1"], r["k2"], s.k1, s.k2)
+        off = ~(worst[good] <= 0.1 * s.k1[good])          # NaN (no estimate) counts as off
+        off_h = ~(np.abs(0.5 * (r["k1"] + r["k2"]) - 1.0)[good] <= 0.1)
+        row = dict(group="spikes", case=f"sphere, {len(s.vertices)} vertices, "
+                   f"{int(spikes.sum())} spikes", method=label, radius=r["radius"],
+                   seconds=r["seconds"], status=r["status"],
+                   **_curvature_row(r["k1"], r["k2"], s, good), off_10pct=float(off.mean()),
+                   off_h_10pct=float(off_h.mean()),
+                   spikes_flagged=float((~r["valid"][spikes]).mean())
+                   if method == "meshcurv" else np.nan)
+        rows.append(row)
+        print(f"spikes {label}: mean |dk| {row['mean_dk']:.4g}, off > 10 % "
+              f"{row['off_10pct'] * 100:.1f} %", flush=True)
+    return rows
+
+
+GROUP_RUNNERS = {"surfaces": group_surfaces, "cnc": group_cnc, "density": group_density,
+                 "icosahedra": group_icosahedra, "spikes": group_spikes}
+
+
+def _git_commit():
+    """Short commit id of the working tree (with "+changes" when it differs), or "-"."""
+    try:
+        out = subprocess.run(["git", "-C", ROOT, "describe", "--always", "--dirty=+changes"],
+                             capture_output=True, text=True, timeout=10)
+        return out.stdout.strip() or "-"
+    except (OSError, subprocess.SubprocessError):
+        return "-"
+
+
+def _cnc_tables(rows):
+    """Markdown: mean |dH| averaged over the files per noise condition, then per file."""
+    if not rows:
+        return ["(not run: meshcurv not among the methods)", ""]
+    columns = [("meshcurv, normals", "default"), ("meshcurv, normals", "~50 points"),
+               ("meshcurv, no normals", "default"), ("meshcurv, no normals", "~50 points")]
+    grid = list(dict.fromkeys((r["sigma_eps"], r["sigma_xi"]) for r in rows
+                              if r["sigma_xi"] is not None))
+    n_files = len({r["file"] for r in rows})
+
+    def average(method, rule, se, sx):
+        vals = [r["mean_dH"] for r in rows if (r["method"], r["radius_rule"], r["sigma_eps"])
+                == (method, rule, se) and (r["sigma_xi"] == sx or sx is None)]
+        return float(np.mean(vals)) if len(vals) == n_files else np.nan
+
+    def min_valid(se, sx):
+        vals = [r["valid"] for r in rows if r["sigma_eps"] == se
+                and r["sigma_xi"] in (sx, None)]
+        return min(vals)
+
+    out = ["| sigma_eps | sigma_xi | CNC K=20 | CNC K=50 | " + " | ".join(
+        f"{m.split(', ')[1]}, R {rule}" for m, rule in columns) + " | least valid |",
+           "|---|---|---|---|" + "---|" * len(columns) + "---|"]
+    for se, sx in grid:
+        ref = CNC_REFERENCE.get((se, sx), (np.nan, np.nan))
+        cells = [_fmt(average(m, rule, se, None if m.endswith("no normals") else sx))
+                 for m, rule in columns]
+        out.append(f"| {se:g} | {sx:g} | {_fmt(ref[0])} | {_fmt(ref[1])} | "
+                   + " | ".join(cells) + f" | {_pct(min_valid(se, sx))} |")
+    out += ["", "Per file (the radius in model units, the median number of neighbours in "
+            "its ball):", "",
+            "| file | sigma_eps | sigma_xi | method | radius | median neighbours | "
+            "mean\\|dH\\| | valid |", "|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        sx = "-" if r["sigma_xi"] is None else f"{r['sigma_xi']:g}"
+        out.append(f"| {r['file']} | {r['sigma_eps']:g} | {sx} | {r['method']} "
+                   f"| {r['radius_rule']}: {_fmt(r['radius'], 3)} "
+                   f"| {r['median_neighbors']:.0f} | {_fmt(r['mean_dH'])} | {_pct(r['valid'])} |")
+    return out + [""]
+
+
+def _case_table(rows, extra=()):
+    """Markdown table of case rows; ``extra`` = ((key, heading, formatter), ...)."""
+    head = "| case | method | radius | valid | mean\\|dk\\| | max\\|dk\\| | " + "".join(
+        f"{h} | " for _, h, _ in extra) + "time s | status |"
+    out = [head, "|" + "---|" * (8 + len(extra))]
+    for r in rows:
+        case = r["case"] + (f", noise {r['noise'] * 100:.1f} %" if "noise" in r else "")
+        out.append(f"| {case} | {r['method']} | {_fmt(r['radius'], 3)} | {_pct(r['valid'])} "
+                   f"| {_fmt(r['mean_dk'])} | {_fmt(r['max_dk'], 3)} | "
+                   + "".join(f"{fmt(r.get(k, np.nan))} | " for k, _, fmt in extra)
+                   + f"{_fmt(r['seconds'], 2)} | {r['status']} |")
+    return out + [""]
+
+
+GROUP_TEXT = {
+    "surfaces": ("Meshes with faces (the ring neighbourhood)",
+                 "Torus R 2, r 0.5 (240 x 60), clean and with Gaussian noise along the normal "
+                 "(0.1 % and 0.3 % of the bounding-box diagonal), R 0.3; paraboloid z = 0.2 x^2 "
+                 "+ 0.1 y^2 on a regular grid of spacing 0.2, R 2; ellipsoid of semi-axes 2, "
+                 "1.5, 1 (a 10242-vertex icosphere scaled), R 0.3; open cylinder r 1 of 32 x 16 "
+                 "square quads (each split in two triangles) at meshcurv's default radius, "
+                 "where max\\|K\\|/k1² is the largest \\|k1 k2\\| / k1_exact² (exact K = 0) "
+                 "at its vertices at least one radius from the border, and at all but the two "
+                 "border rings. Errors over the vertices at least one radius from a border."),
+    "cnc": ("The CNC benchmark clouds (Lachaud et al. 2023)",
+            "The six clouds of `../shared/bench/cnc` under the paper's noise model (Gaussian, "
+            "per coordinate: sigma_eps on the positions, sigma_xi on the normals, then "
+            "renormalised; absolute units; fixed seeds). Mean \\|H - H_true\\| over each "
+            "file's points with an estimate, averaged over the files; H_true is the exact "
+            "mean curvature at the noise-free point's projection onto the surface (torus "
+            "R 6, r 2; Goursat's implicit function, P Hess(F) P / \\|grad F\\|). meshcurv "
+            "given the noisy normals, and given none (then it estimates and orients its own; "
+            "those columns do not depend on sigma_xi); radius: meshcurv's default "
+            "(`radius=None`, a ball of ~100 points) and the ball holding ~50 points "
+            "(`default_radius(points, target_neighbors=50)`, CNC's K = 50). CNC columns: "
+            "the reference figures of the benchmark's README (the authors' code, K nearest "
+            "neighbours, exact normals perturbed by sigma_xi); no figure where it gives none. "
+            "`least valid`: the smallest share of points with an estimate among the files."),
+    "density": ("One-sided cloud of falling density",
+                "Upper half of the unit sphere (k = 1), ~10000 points whose density falls 25x "
+                "from x = -1 to x = 1 (random, exponential in x), no faces. valid and errors "
+                "over all points, the open rim included; \\|dk\\| = max(\\|dk1\\|, "
+                "\\|dk2\\|) for the max."),
+    "icosahedra": ("Low-poly spheres",
+                   "`trimesh.creation.icosphere(subdivisions)` 0, 1, 2 (12, 42, 162 vertices, "
+                   "radius 1, k = 1); meshcurv at its default radius with the faces and on the "
+                   "points alone; SDQF and APSS at meshcurv's default radius. A row is valid "
+                   "where the method gave a finite estimate."),
+    "spikes": ("Sphere with scanner spikes",
+               "Icosphere of 10242 vertices (radius 1), Gaussian noise of 0.05 % of the "
+               "diagonal along the normal, 2 % of the vertices pushed out or in along the "
+               "normal by 1-4 % of the diagonal (uniform, random sign; fixed seed); R 0.3. "
+               "Errors over the other 98 %: mean \\|dk\\| = mean (\\|dk1\\| + "
+               "\\|dk2\\|) / 2 over their estimates, `off > 10 %` = share whose max"
+               "(\\|dk1\\|, \\|dk2\\|) exceeds 0.1 or that have no estimate, "
+               "`H off > 10 %` the same for \\|H - 1\\|; "
+               "`spikes flagged` = share of the spikes meshcurv marks invalid. meshcurv with "
+               "the faces and on the points alone (normals estimated); MeshLab on the mesh "
+               "(APSS with MeshLab's vertex normals)."),
+}
+
+
+def _summary(results):
+    """Markdown rows: per case of the mesh groups, meshcurv against the best MeshLab method."""
+    out = []
+    for group in ("surfaces", "spikes"):
+        rows = results.get(group, [])
+        keys = list(dict.fromkeys((r["case"], r.get("noise")) for r in rows))
+        for case, noise in keys:
+            by = {r["method"]: r for r in rows if (r["case"], r.get("noise")) == (case, noise)}
+            ours = by.get("meshcurv", by.get("meshcurv, mesh"))
+            others = [(r["mean_dk"], m) for m, r in by.items()
+                      if m in ("QF", "SDQF", "APSS") and np.isfinite(r["mean_dk"])]
+            if ours is None or not others:
+                continue
+            best, name = min(others)
+            label = case + (f", noise {noise * 100:.1f} %" if noise is not None else "")
+            out.append(f"| {label} | {_fmt(ours['mean_dk'])} | {name} {_fmt(best)} "
+                       f"| {_fmt(ours['mean_dk'] / best, 2)} |")
+    if not out:
+        return []
+    return ["| case | meshcurv | best MeshLab | ratio |", "|---|---|---|---|"] + out + [""]
+
+
+def write_accuracy_report(path, results, command, seconds, switches):
+    """docs/accuracy_cases.md: one section per group run."""
+    import meshcurv
+
+    lines = ["# Accuracy cases: meshcurv and MeshLab against exact curvature", "",
+             f"Generated by `{command}` in {seconds:.0f} s on commit {_git_commit()}. "
+             "Run one group with `python scripts/compare_meshlab.py --accuracy-cases GROUP` "
+             f"(groups: {', '.join(ACCURACY_GROUPS)}; `--methods meshcurv` skips MeshLab, "
+             "`--option NAME=VALUE` passes a meshcurv switch, `--smallest` the test-suite "
+             "sizes). Sign convention of every column: outward normal, convex positive, "
+             "k1 >= k2.", "",
+             f"meshcurv: `principal_curvatures` with `{meshcurv.Options(**switches)!r}`"
+             + (f" (switches given: {switches})" if switches else " (its defaults)")
+             + ", its default radius where a row says none. MeshLab (pymeshlab, one child "
+             "process per call): Taubin (1-ring), QF (2-ring), SDQF (`scale` = the radius), "
+             "APSS (support matched to the radius); see the script's docstring. "
+             "valid = share of the rows with a finite estimate; \\|dk\\| per vertex = "
+             "(\\|dk1\\| + \\|dk2\\|) / 2 for the mean, max(\\|dk1\\|, "
+             "\\|dk2\\|) for the max, over the valid rows.", ""]
+    extras = {"surfaces": (("max_K_over_k1sq", "max\\|K\\|/k1²", lambda x: _fmt(x, 4)),
+                           ("max_K_over_k1sq_off_border", "same, off the border rings",
+                            lambda x: _fmt(x, 4))),
+              "spikes": (("off_10pct", "off > 10 %", _pct), ("off_h_10pct", "H off > 10 %", _pct),
+                         ("spikes_flagged", "spikes flagged", _pct))}
+    summary = _summary(results)
+    if summary:
+        lines += ["## Summary", "", "meshcurv's mean \\|dk\\| against the best MeshLab method "
+                  "of the same row set (QF, SDQF, APSS; Taubin is never the best); ratio > 1: "
+                  "meshcurv worse.", ""] + summary
+    for group, rows in results.items():
+        title, text = GROUP_TEXT[group]
+        lines += [f"## {title} (`--accuracy-cases {group}`)", "", text, ""]
+        lines += _cnc_tables(rows) if group == "cnc" else _case_table(rows, extras.get(group, ()))
+    with open(path, "w") as fh:
+        fh.write("\n".join(lines))
+
+
+def parse_methods(text):
+    """``--methods`` text -> method names in run order; "meshlab" = Taubin, QF, SDQF, APSS."""
+    names = []
+    for item in (t.strip() for t in text.split(",") if t.strip()):
+        expanded = list(MESHLAB_NAMES) if item.lower() == "meshlab" else [item]
+        for name in expanded:
+            match = [m for m in ("meshcurv",) + MESHLAB_NAMES if m.lower() == name.lower()]
+            if not match:
+                raise SystemExit(f"--methods: unknown method {name!r}; choose from meshcurv, "
+                                 f"meshlab, {', '.join(MESHLAB_NAMES)}")
+            names += [m for m in match if m not in names]
+    return names
+
+
+def parse_groups(text):
+    """``--accuracy-cases`` text -> group names; "all" = every group."""
+    items = [t.strip().lower() for t in text.split(",") if t.strip()]
+    if "all" in items:
+        return list(ACCURACY_GROUPS)
+    bad = [t for t in items if t not in ACCURACY_GROUPS]
+    if bad or not items:
+        raise SystemExit(f"--accuracy-cases: unknown group {bad[0] if bad else text!r}; choose "
+                         f"from all, {', '.join(ACCURACY_GROUPS)}")
+    return [g for g in ACCURACY_GROUPS if g in items]
+
+
+def parse_switches(items):
+    """``--option NAME=VALUE`` items -> meshcurv switches (values read as Python literals
+    where they are, e.g. False, 0.5, (0, 0, 100); else as text)."""
+    import ast
+
+    import meshcurv
+
+    fields = set(meshcurv.Options.__dataclass_fields__)
+    switches = {}
+    for item in items or ():
+        name, sep, value = item.partition("=")
+        if not sep or name.strip() not in fields:
+            raise SystemExit(f"--option: expected NAME=VALUE with NAME one of "
+                             f"{', '.join(sorted(fields))}, got {item!r}")
+        try:
+            switches[name.strip()] = ast.literal_eval(value.strip())
+        except (ValueError, SyntaxError):
+            switches[name.strip()] = value.strip()
+    return switches
+
+
+def run_accuracy_cases(groups, methods, size="full", switches=None, out=None, timeout=300.0,
+                       cnc_dir=None, command=None):
+    """Run the accuracy-case ``groups`` with ``methods``; writes ``accuracy_cases.md`` and
+    ``accuracy_cases.json`` into ``out`` and returns {group: rows}."""
+    switches = switches or {}
+    t0 = time.perf_counter()
+    warm_up()
+    results = {}
+    for group in groups:
+        results[group] = GROUP_RUNNERS[group](methods, size, switches, timeout, cnc_dir=cnc_dir)
+    os.makedirs(out, exist_ok=True)
+    with open(os.path.join(out, "accuracy_cases.json"), "w") as fh:
+        json.dump(results, fh, indent=1, default=float)
+    path = os.path.join(out, "accuracy_cases.md")
+    write_accuracy_report(path, results, command or "python scripts/compare_meshlab.py",
+                          time.perf_counter() - t0, switches)
+    print("wrote", path)
+    return results
 
 
 # ---------------------------------------------------------------------------------------------
@@ -797,9 +1397,37 @@ def main(argv=None):
                          "system's temporary directory for --quick and --smallest)")
     ap.add_argument("--timeout", type=float, default=None, help="seconds per MeshLab call")
     ap.add_argument("--no-pictures", action="store_true")
+    ap.add_argument("--accuracy-cases", metavar="GROUPS", default=None,
+                    help="run the accuracy cases instead of the comparison: 'all' or a comma "
+                         f"list of {', '.join(ACCURACY_GROUPS)}; writes accuracy_cases.md "
+                         "(docs/ for 'all' at full size with the default methods and "
+                         "options, else a temporary folder, or --out)")
+    ap.add_argument("--methods", default="meshcurv,meshlab",
+                    help="with --accuracy-cases: comma list of meshcurv, meshlab (= Taubin, "
+                         "QF, SDQF, APSS) or single MeshLab methods (default: %(default)s)")
+    ap.add_argument("--option", action="append", metavar="NAME=VALUE",
+                    help="with --accuracy-cases: a meshcurv.Options switch for every meshcurv "
+                         "run (repeatable), e.g. --option weighting=none")
+    ap.add_argument("--cnc-dir", default=None,
+                    help="folder of the CNC benchmark clouds (default: $MESHCURV_CNC_DIR or "
+                         "shared/bench/cnc beside the repository or a parent folder)")
     args = ap.parse_args(argv)
     mode = "quick" if args.quick else "smallest" if args.smallest else "full"
     timeout = args.timeout or {"smallest": 60, "quick": 60, "full": 300}[mode]
+    if args.accuracy_cases is not None:
+        if args.quick:
+            ap.error("--quick has no accuracy-case sizes; use --smallest or neither")
+        groups, methods = parse_groups(args.accuracy_cases), parse_methods(args.methods)
+        switches = parse_switches(args.option)
+        if args.out is None:
+            reference = (groups == list(ACCURACY_GROUPS) and mode == "full" and not switches
+                         and args.methods == ap.get_default("methods"))
+            args.out = (os.path.join(ROOT, "docs") if reference else
+                        os.path.join(tempfile.gettempdir(), "meshcurv_accuracy_cases"))
+        command = "python scripts/compare_meshlab.py " + " ".join(
+            a for a in (argv if argv is not None else sys.argv[1:]))
+        return run_accuracy_cases(groups, methods, "smallest" if args.smallest else "full",
+                                  switches, args.out, timeout, args.cnc_dir, command.strip())
     if args.out is None:
         args.out = (os.path.join(ROOT, "docs") if mode == "full" else
                     os.path.join(tempfile.gettempdir(), f"meshcurv_comparison_{mode}"))

@@ -15,7 +15,7 @@ __all__ = ["Options", "OPTION_NAMES", "CHOICES", "MAX_DIRECTIONS", "check_option
 # Research switches of the estimator: the fields of Options, in order.
 SWITCH_NAMES = ("slab", "min_points", "min_spread", "weighting", "circle_normalization",
                 "section_blend", "robust", "half_frequency", "normal_estimation",
-                "refine_normals", "orientation")
+                "refine_normals", "orientation", "normal_constraints")
 # Every option of principal_curvatures besides the data (vertices, faces, normals) and the
 # call's own arguments (options, query, progress): its three public knobs and the switches.
 OPTION_NAMES = ("radius", "n_directions", "neighborhood") + SWITCH_NAMES
@@ -24,7 +24,8 @@ OPTION_NAMES = ("radius", "n_directions", "neighborhood") + SWITCH_NAMES
 CHOICES = {"neighborhood": ("auto", "kring", "ball"),
            "normal_estimation": ("auto", "faces", "pca"),
            "weighting": ("auto", "distance", "none"),
-           "circle_normalization": ("tangent", "unit")}
+           "circle_normalization": ("tangent", "unit"),
+           "normal_constraints": ("auto", "off")}
 
 # Most planes through the normal (``n_directions``). Each kernel thread holds 2 x that many
 # half-set accumulators and the robust step sorts the 2 x n_directions circle fits by insertion
@@ -133,6 +134,14 @@ class Options:
         Global orientation of estimated point-cloud normals: "mst" propagates along a minimum
         spanning tree and then turns each connected piece away from its own centroid; a (3,)
         point orients every normal towards it (a scanner position).
+    normal_constraints : {"auto", "off"}
+        "auto": where every point has a normal before the circle fits (given normals, the
+        spanning-tree normals of clouds, the face normals of meshes) each half-set's circle
+        fit also fits its neighbors' normals: along the half-set's direction e the normal
+        turns by (n_p - n_x) . e = kappa (p . e), rows added to the least squares with the
+        weight of their measured reliability (the ratio of the position rows' and the normal
+        rows' residual variances, pooled per vertex), so noisy normals count little and exact
+        ones dominate under position noise. "off": positions only.
 
     Examples
     --------
@@ -155,6 +164,7 @@ class Options:
     normal_estimation: str = "auto"
     refine_normals: object = None
     orientation: object = "mst"
+    normal_constraints: str = "auto"
 
     def __post_init__(self):
         check_options(**self.as_dict())
@@ -192,6 +202,7 @@ class Plan(NamedTuple):
     of all points first, oriented along a spanning tree). ``refine``: quadric-refined normals.
     ``weighting``: as the option. ``fit``: the fused kernel's settings ``(n_directions, slab,
     min_points, min_spread, unit_norm, section_blend, half_frequency, robust)``, typed.
+    ``normal_constraints``: normal-aware circle fits where a normal field exists.
     """
 
     use_kring: bool
@@ -200,13 +211,14 @@ class Plan(NamedTuple):
     refine: bool
     weighting: str
     fit: tuple
+    normal_constraints: bool = False
 
 
 def resolve_plan(has_faces, has_normals, n_directions=8, neighborhood="auto", slab=0.25,
                  min_points=3, min_spread=0.25, weighting="auto",
                  circle_normalization="tangent", section_blend=True, robust=True,
                  half_frequency=False, normal_estimation="auto", refine_normals=None,
-                 orientation="mst"):
+                 orientation="mst", normal_constraints="auto"):
     """The :class:`Plan` of a call with these options (the defaults of
     :func:`meshcurv.principal_curvatures`) on input with or without faces and given normals.
 
@@ -221,7 +233,8 @@ def resolve_plan(has_faces, has_normals, n_directions=8, neighborhood="auto", sl
     orientation = check_options(neighborhood=neighborhood, normal_estimation=normal_estimation,
                                 orientation=orientation, weighting=weighting,
                                 circle_normalization=circle_normalization,
-                                n_directions=n_directions)
+                                n_directions=n_directions,
+                                normal_constraints=normal_constraints)
     if neighborhood == "kring" and not has_faces:
         raise ValueError("neighborhood='kring' needs faces")
     if normal_estimation == "faces" and not has_normals and not has_faces:
@@ -237,4 +250,5 @@ def resolve_plan(has_faces, has_normals, n_directions=8, neighborhood="auto", sl
            circle_normalization == "unit", bool(section_blend), bool(half_frequency),
            bool(robust))
     refine = not has_normals if refine_normals is None else bool(refine_normals)
-    return Plan(has_faces and neighborhood != "ball", normals, viewpoint, refine, weighting, fit)
+    return Plan(has_faces and neighborhood != "ball", normals, viewpoint, refine, weighting, fit,
+                normal_constraints == "auto")

@@ -237,23 +237,20 @@ class _Outputs:
 
 
 def _normal_field(nv, face_normals, search, plan):
-    """``(field, field_of_points)``: unit normals of every vertex (n, 3) for the normal-aware
-    circle fits - ``nv`` (given, face or spanning-tree normals), else the face normals - and
-    the same rows in the order of ``search.points``; ``(None, None)`` without one or when
-    ``plan.normal_constraints`` is off."""
+    """Unit normals of every vertex for the normal-aware circle fits - ``nv`` (given, face or
+    spanning-tree normals), else the face normals - in the order of ``search.points``
+    ((n, 3)); None without them or when ``plan.normal_constraints`` is off."""
     field = nv if nv is not None else face_normals
     if not plan.normal_constraints or field is None:
-        return None, None
+        return None
     with np.errstate(invalid="ignore", divide="ignore"):
         field = field / np.linalg.norm(field, axis=1, keepdims=True)
-    return field, (field if search.rank is None else field[search.rank])
+    return field if search.rank is None else field[search.rank]
 
 
-def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, field=None,
-               field_of_points=None, idx=None):
+def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, field_of_points=None):
     """Local jet (noise, refined normal) and the fused fits of one block, into ``out[pos]``;
-    with a normal ``field`` (see :func:`_normal_field`) the circle fits use it at the block's
-    vertices ``idx``."""
+    with the normals of ``search.points`` (see :func:`_normal_field`), normal-aware fits."""
     b = len(xb)
     noise = np.empty(b)
     start = qb.copy() if plan.refine else None
@@ -267,7 +264,7 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, field=No
     blend = beta if plan.weighting == "auto" else weight_blend(noise, radius, plan.weighting)
     fused.curvature_cga(search.points, xb, qb, indptr, indices, radius, blend, plan.fit,
                         (k1, k2, d1, d2, samples, residual, nbrs, status), search.rank,
-                        field_of_points, None if field is None else field[idx])
+                        field_of_points)
     out.k1[pos], out.k2[pos], out.d1[pos], out.d2[pos] = k1, k2, d1, d2
     out.normals[pos], out.n_samples[pos], out.residual[pos] = qb, samples, residual
     out.n_neighbors[pos], out.noise[pos], out.status[pos] = nbrs, noise, status
@@ -296,7 +293,7 @@ def run(v, f, given_normals, radius, query, plan, progress=False):
     block = block_size(search, query, radius, "vertices" if f is not None else "points")
     nv, face_normals = _start_normals(v, f, given_normals, radius, search, finite, plan,
                                       progress)
-    field, field_of_points = _normal_field(nv, face_normals, search, plan)
+    field_of_points = _normal_field(nv, face_normals, search, plan)
     out = _Outputs(len(query))
     # queries by grid cell for ball queries (the points a block touches then stay in cache);
     # as given for k-rings, whose memory accesses follow the mesh's own numbering
@@ -306,7 +303,6 @@ def run(v, f, given_normals, radius, query, plan, progress=False):
         xb = v[idx]
         indptr, indices = search.neighbors(idx)
         qb = _block_normals(nv, face_normals, idx, xb, indptr, indices, radius, search, plan)
-        _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, field,
-                   field_of_points, idx)
+        _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, field_of_points)
         del indptr, indices
     return out.result(radius)

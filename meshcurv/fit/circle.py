@@ -14,14 +14,17 @@ from .constants import WEIGHT_POWER
 # r2^2. The sums of r2*cos2phi ... tell the sine fit which blend of directions a half-set really
 # saw (see ``sample_design``). _CNT counts the points, _EMAX is the farthest reach along the
 # plane's direction. With a normal field, each neighbor p with normal n_p also gives a normal row
-# b = kappa a, a = p . e along the half-set's direction e and b = (n_p - n_ref) . e its normal's
-# turn (n_ref the field at x): the weighted sums of a^2, a b, b^2, of a s (s = p . e_perp, the
-# offset across the slab, for the direction mix of these rows), the rows' weight and count.
+# b = kappa a: a = (p - c) . e along the plane's direction e and b = (n_p - nbar) . e the turn
+# of its normal, both relative to the weighted means c, nbar of the ball's points and normals
+# (the first-order field n_p = nbar + S (p - c) holds whatever x's own normal is, and nbar is
+# far less noisy than one normal): the weighted sums of a, b, s (s = (p - c) . e_perp, across
+# the slab, for the direction mix of these rows), a^2, a b, b^2, a s, b s, s^2, the rows'
+# weight and count.
 _N, _H, _HH, _R, _HR, _RR, _RC, _RRC, _RS, _RRS, _CNT, _EMAX = range(12)
-_AA, _AB, _BB, _AS, _NW, _NCNT = range(12, 18)
+_A, _B, _S, _AA, _AB, _BB, _AS, _BS, _SS, _NW, _NCNT = range(12, 23)
 
 
-N_ACC = 18
+N_ACC = 23
 
 
 @njit(cache=True)
@@ -103,7 +106,7 @@ def circle_fit(acc, k, unit_norm, b, ev, mu=0.0):
 
 @njit(cache=True)
 def accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta, planes, slab,
-                         acc, point_normals=None, ref=None):
+                         acc, point_normals=None):
     """Accumulate the neighbors ``points[nbr[lo:hi]]`` of x into the half-sets' sums; their count.
 
     Each neighbor within the ball (``r2max`` the squared radius, ``inv_r`` its inverse; model
@@ -113,9 +116,9 @@ def accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta, 
     the positive side of plane i's direction ``planes[0][i], planes[1][i]`` (cos, sin), i + ndir
     on the negative side. Returns the number of neighbors in the ball.
 
-    ``point_normals`` ((n, 3) unit, aligned with ``points``; NaN rows give no normal row) and
-    ``ref`` ((3,), the field's normal at x) add each neighbor's normal row; a neighbor normal
-    facing away from ``ref`` is turned round first.
+    ``point_normals`` ((n, 3) unit, aligned with ``points``; NaN rows give no normal row) add
+    each neighbor's normal row, centred on the ball's weighted mean position and normal (a
+    normal facing away from n is turned round first).
     """
     ca, sa = planes[0], planes[1]
     ndir = ca.shape[0]
@@ -123,6 +126,8 @@ def accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta, 
         for c in range(N_ACC):
             acc[k, c] = 0.0
     n_nbr = 0
+    # weighted sums over the ball's normal rows: weight, u, v, bu, bv (the means c and nbar)
+    sw, su, sv, sbu, sbv = 0.0, 0.0, 0.0, 0.0, 0.0
     for j in range(lo, hi):
         inside, qx, qy, qz, r2 = ball_offset(points, nbr[j], x[0], x[1], x[2], r2max, inv_r)
         if not inside:
@@ -135,24 +140,56 @@ def accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta, 
         if point_normals is not None:
             p = nbr[j]
             sgn = 1.0
-            if (point_normals[p, 0] * ref[0] + point_normals[p, 1] * ref[1]
-                    + point_normals[p, 2] * ref[2]) < 0.0:
+            if (point_normals[p, 0] * n[0] + point_normals[p, 1] * n[1]
+                    + point_normals[p, 2] * n[2]) < 0.0:
                 sgn = -1.0
-            d0 = sgn * point_normals[p, 0] - ref[0]
-            d1 = sgn * point_normals[p, 1] - ref[1]
-            d2 = sgn * point_normals[p, 2] - ref[2]
-            bu = d0 * tu[0] + d1 * tu[1] + d2 * tu[2]
-            bv = d0 * tv[0] + d1 * tv[1] + d2 * tv[2]
-            has_normal = np.isfinite(bu + bv)
+            bu = sgn * (point_normals[p, 0] * tu[0] + point_normals[p, 1] * tu[1]
+                        + point_normals[p, 2] * tu[2])
+            bv = sgn * (point_normals[p, 0] * tv[0] + point_normals[p, 1] * tv[1]
+                        + point_normals[p, 2] * tv[2])
+            has_normal = np.isfinite(bu + bv) and u * u + v * v > 0.0
+            if has_normal:
+                w = (1.0 - beta) + beta * (1.0 - r2) ** WEIGHT_POWER
+                sw += w
+                su += w * u
+                sv += w * v
+                sbu += w * bu
+                sbv += w * bv
         add_point(acc, u, v, h, r2, beta, ca, sa, slab, bu, bv, has_normal)
+    if sw > 0.0:
+        center_normal_rows(acc, ca, sa, su / sw, sv / sw, sbu / sw, sbv / sw)
     return n_nbr
+
+
+@njit(cache=True)
+def center_normal_rows(acc, ca, sa, cu, cv, du, dv):
+    """Move the half-sets' normal-row sums from a = p . e, b = n_p . e, s = p . e_perp to the
+    ball's means: a - c . e, b - nbar . e, s - c . e_perp, with c = (cu, cv), nbar's tangent part
+    (du, dv) (the sums' first moments make this exact)."""
+    ndir = ca.shape[0]
+    for k in range(2 * ndir):
+        i = k % ndir
+        ce = ca[i] * cu + sa[i] * cv
+        cp = -sa[i] * cu + ca[i] * cv
+        de = ca[i] * du + sa[i] * dv
+        w, a, b, s = acc[k, _NW], acc[k, _A], acc[k, _B], acc[k, _S]
+        acc[k, _AA] += -2.0 * ce * a + ce * ce * w
+        acc[k, _AB] += -ce * b - de * a + ce * de * w
+        acc[k, _BB] += -2.0 * de * b + de * de * w
+        acc[k, _AS] += -ce * s - cp * a + ce * cp * w
+        acc[k, _BS] += -de * s - cp * b + de * cp * w
+        acc[k, _SS] += -2.0 * cp * s + cp * cp * w
+        acc[k, _A] = a - ce * w
+        acc[k, _B] = b - de * w
+        acc[k, _S] = s - cp * w
 
 
 @njit(cache=True)
 def add_point(acc, u, v, h, r2, beta, ca, sa, slab, bu=0.0, bv=0.0, has_normal=False):
     """Add one neighbor at frame coordinates (u, v, h), squared distance r2 (units of the
     radius), to the accumulator rows of the half-sets whose slabs hold it; with
-    ``has_normal`` also its normal row, (bu, bv) the tangent components of n_p - n_ref."""
+    ``has_normal`` also its normal row, (bu, bv) the tangent components of n_p (before
+    :func:`center_normal_rows`)."""
     t2 = u * u + v * v
     if t2 <= 0.0:
         return
@@ -182,12 +219,18 @@ def add_point(acc, u, v, h, r2, beta, ca, sa, slab, bu=0.0, bv=0.0, has_normal=F
         if abs(e) > acc[k, _EMAX]:
             acc[k, _EMAX] = abs(e)
         if has_normal:
-            # a, b and s all change sign on the negative side: their products do not
+            # along plane i's own direction on both sides: a, b and s all change sign with the
+            # side's direction, their products (all the fits use) do not
             b = ca[i] * bu + sa[i] * bv
+            acc[k, _A] += w * e
+            acc[k, _B] += w * b
+            acc[k, _S] += w * s
             acc[k, _AA] += w * e * e
             acc[k, _AB] += w * e * b
             acc[k, _BB] += w * b * b
             acc[k, _AS] += w * e * s
+            acc[k, _BS] += w * b * s
+            acc[k, _SS] += w * s * s
             acc[k, _NW] += w
             acc[k, _NCNT] += 1.0
 
@@ -199,9 +242,11 @@ def normal_row_weight(acc, ndir, min_points, min_spread):
     fitted (0 when there are no normal rows).
 
     Per half-set, the position rows' weighted SSE of their own fit (x's row included) and the
-    normal rows' of ``b = kappa a``, both quadratic forms of the sums; each pooled variance is
-    ``sum SSE / sum W (cnt - p) / cnt`` (W the rows' weight, p = 2 and 1 parameters). The
-    floor ``1e-12`` (a residual of 1e-6 radius) keeps the ratio defined on exact data.
+    normal rows' of ``b = kappa a + gamma s`` (gamma = S(e_perp, e), the turn across the slab
+    that :func:`sample_design` models, is not noise), both quadratic forms of the sums; each
+    pooled variance is ``sum SSE / sum W (cnt - 2) / cnt`` (W the rows' weight, cnt their
+    number). The floor ``1e-12`` (a residual of 1e-6 radius) keeps the ratio defined on exact
+    data.
     """
     sse_p = 0.0
     dof_p = 0.0
@@ -219,9 +264,12 @@ def normal_row_weight(acc, ndir, min_points, min_spread):
             t2 = (sh - 0.5 * sr * t3) / nw
             sse_p += max(shh - t2 * sh - 0.5 * t3 * shr, 0.0)
             dof_p += nw * (cnt - 2.0) / cnt
-        if acc[k, _AA] > 0.0 and acc[k, _NCNT] > 1.0:
-            sse_n += max(acc[k, _BB] - acc[k, _AB] * acc[k, _AB] / acc[k, _AA], 0.0)
-            dof_n += acc[k, _NW] * (acc[k, _NCNT] - 1.0) / acc[k, _NCNT]
+        saa, sas, sss, sab, sbs = acc[k, _AA], acc[k, _AS], acc[k, _SS], acc[k, _AB], acc[k, _BS]
+        dn = saa * sss - sas * sas
+        if dn > 1e-14 * saa * sss and acc[k, _NCNT] > 2.0:
+            fit = (sss * sab * sab - 2.0 * sas * sab * sbs + saa * sbs * sbs) / dn
+            sse_n += max(acc[k, _BB] - fit, 0.0)
+            dof_n += acc[k, _NW] * (acc[k, _NCNT] - 2.0) / acc[k, _NCNT]
     if not (dof_n > 0.0 and dof_p > 0.0):
         return 0.0
     return (sse_p / dof_p + 1e-12) / (sse_n / dof_n + 1e-12)

@@ -25,7 +25,7 @@ __all__ = ["curvature_cga", "estimate_one", "sampling_planes", "cache_is_warm"]
 
 @njit(cache=True)
 def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, work, tu, tv,
-                 point_normals=None, ref=None):
+                 point_normals=None):
     """Circle fits in 2 ndir half-sets around one point x, then the Euler model fit.
 
     Parameters
@@ -40,8 +40,8 @@ def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, wo
     work : ``(acc, kappa, rows, active, scratch, mat, rhs, sol, b3, ev, mix)`` scratch arrays
         (see :func:`curvature_cga`)
     tu, tv : (3,) float64 outputs, the tangent frame
-    point_normals : (n, 3) float64 unit normals aligned with ``points``, or None; ref : (3,)
-        the field's normal at x. With them each circle fit also fits its neighbors' normals
+    point_normals : (n, 3) float64 unit normals aligned with ``points``, or None: each circle
+        fit then also fits its neighbors' normals
         (:func:`meshcurv.fit.circle.circle_fit`), weighted by
         :func:`meshcurv.fit.circle.normal_row_weight`.
 
@@ -60,7 +60,7 @@ def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, wo
     r2max = radius * radius
     tangent_frame(points, nbr, lo, hi, x, n, r2max, tu, tv, rank)
     n_nbr = accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta,
-                                 (ca, sa), slab, acc, point_normals, ref)
+                                 (ca, sa), slab, acc, point_normals)
     mu = 0.0
     if point_normals is not None:
         mu = normal_row_weight(acc, ndir, min_points, min_spread)
@@ -118,7 +118,7 @@ def _write_directions(q, theta1, tu, tv, n, d1, d2):
 
 @njit(parallel=True, cache=True)
 def curvature_cga(points, query_points, query_normals, indptr, indices, radius, blend, opts,
-                  out, rank=None, point_normals=None, ref_normals=None):
+                  out, rank=None, point_normals=None):
     """Fused CGA circle-fit estimator over query points with CSR neighbor lists.
 
     Parameters
@@ -144,9 +144,8 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
         in another order (e.g. a grid's sorted copy, for memory locality): the tangent frame's
         lowest-index rule then picks the same neighbor as on the input.
     point_normals : (n, 3) float64, optional, unit normals of ``points`` (same rows; NaN where
-        unknown), and ``ref_normals`` (m, 3) the same field's normal at each query point: the
-        circle fits then also fit the normals' turn (normal-aware circle fits; see
-        :func:`estimate_one`). ``query_normals`` still sets each frame.
+        unknown): the circle fits then also fit the normals' turn (normal-aware circle fits;
+        see :func:`estimate_one`). ``query_normals`` still sets each frame.
     """
     k1, k2, d1, d2, n_samples, residual, n_neighbors, status = out
     ndir = opts[0]
@@ -181,7 +180,7 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
                 else:
                     e1, e2, theta1, used, rms, n_nbr, why = estimate_one(
                         points, indices, indptr[q], indptr[q + 1], x, n, rank, radius,
-                        blend[q], opts, planes, work, tu, tv, point_normals, ref_normals[q])
+                        blend[q], opts, planes, work, tu, tv, point_normals)
             if why == STATUS_OK and not np.isfinite(e1):
                 why = STATUS_ILL_POSED_FIT
             status[q] = why

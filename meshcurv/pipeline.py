@@ -264,7 +264,7 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, field_of
     blend = beta if plan.weighting == "auto" else weight_blend(noise, radius, plan.weighting)
     fused.curvature_cga(search.points, xb, qb, indptr, indices, radius, blend, plan.fit,
                         (k1, k2, d1, d2, samples, residual, nbrs, status), search.rank,
-                        field_of_points)
+                        field_of_points, None if field_of_points is None else noise)
     out.k1[pos], out.k2[pos], out.d1[pos], out.d2[pos] = k1, k2, d1, d2
     out.normals[pos], out.n_samples[pos], out.residual[pos] = qb, samples, residual
     out.n_neighbors[pos], out.noise[pos], out.status[pos] = nbrs, noise, status

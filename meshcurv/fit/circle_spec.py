@@ -190,32 +190,30 @@ def normal_turn_rows(uv, turn_uv, theta):
     return along, across, turn
 
 
-def normal_row_weight(half_sets):
+def normal_row_weight(half_sets, height_var):
     """Weight of the normal rows relative to the position rows of one point's circle fits
     (specification of :func:`meshcurv.fit.circle.normal_row_weight`).
 
-    The ratio of the two kinds of rows' residual variances, each pooled over the half-sets:
-    position rows from their own (tangent) circle fit, normal rows from
-    ``turn = kappa along + gamma across`` (the turn across the slab is modelled, not noise);
-    ``sum SSE / sum W (cnt - 2) / cnt`` with W the rows' total weight and cnt their number;
-    both floored by 1e-12.
+    The ratio of the two kinds of rows' noise variances: ``height_var`` for the positions (the
+    local cubic fit's, units of the radius; NaN gives 0), for the normals their residual of
+    ``turn = kappa along + gamma across`` (the turn across the slab is modelled, not noise)
+    pooled over the half-sets, ``sum SSE / sum W (cnt - 2) / cnt`` with W the rows' total weight
+    and cnt their number; both floored by 1e-12.
 
     Parameters
     ----------
-    half_sets : list of ``(pts, normal, weights, along, across, turn)``: each half-set's
-        points relative to x (x itself first), the normal at x, the weights, the normal rows
-        (NaN turn: none)
+    half_sets : list of ``(weights, along, across, turn)``, each (k,): every half-set's normal
+        rows and their weights (NaN turn: none)
+    height_var : float
 
     Returns
     -------
     float, 0 where there are no normal rows
     """
-    sse_p = dof_p = sse_n = dof_n = 0.0
-    for pts, normal, wt, along, across, turn in half_sets:
-        _, sse = fit_normal_circle(pts, normal, wt)
-        if np.isfinite(sse) and len(pts) > 2:
-            sse_p += sse
-            dof_p += wt.sum() * (len(pts) - 2) / len(pts)
+    if not np.isfinite(height_var):
+        return 0.0
+    sse_n = dof_n = 0.0
+    for wt, along, across, turn in half_sets:
         has = np.isfinite(turn)
         x = np.column_stack([along[has], across[has]])
         g = (x * wt[has, None]).T @ x
@@ -223,6 +221,6 @@ def normal_row_weight(half_sets):
             coef = np.linalg.solve(g, (x * wt[has, None]).T @ turn[has])
             sse_n += max(np.sum(wt[has] * (turn[has] - x @ coef) ** 2), 0.0)
             dof_n += wt[has].sum() * (has.sum() - 2) / has.sum()
-    if not (dof_n > 0 and dof_p > 0):
+    if not dof_n > 0:
         return 0.0
-    return (sse_p / dof_p + 1e-12) / (sse_n / dof_n + 1e-12)
+    return (height_var + 1e-12) / (sse_n / dof_n + 1e-12)

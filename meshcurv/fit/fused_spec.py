@@ -19,7 +19,7 @@ __all__ = ["curvature_at_point"]
 def curvature_at_point(x, n, neighbors, radius, n_directions=8, slab=0.25, min_points=3,
                        min_spread=0.25, blend=1.0, circle_normalization="tangent",
                        section_blend=True, half_frequency=False, robust=True,
-                       neighbor_normals=None):
+                       neighbor_normals=None, noise=np.nan):
     """Principal curvatures at one point from its neighbors (the kernel's contract, in numpy).
 
     Parameters
@@ -36,7 +36,8 @@ def curvature_at_point(x, n, neighbors, radius, n_directions=8, slab=0.25, min_p
         normal-aware circle fits, each half-set's normal rows
         (:func:`~meshcurv.fit.circle_spec.normal_turn_rows`, relative to the ball's weighted
         mean position and normal) weighted by
-        :func:`~meshcurv.fit.circle_spec.normal_row_weight`
+        :func:`~meshcurv.fit.circle_spec.normal_row_weight` from ``noise`` (model units, the
+        local cubic fit's RMS height residual)
 
     Returns
     -------
@@ -85,15 +86,18 @@ def curvature_at_point(x, n, neighbors, radius, n_directions=8, slab=0.25, min_p
                 nrows = normal_turn_rows(uv[half], turn_uv[half], theta)
             halves.append((i, theta, half, nrows))
     # x itself is in every half-set: position row (0, -1, 0), no normal row
-    fits = [(np.vstack([np.zeros(3), q[half]]), n, np.concatenate([[1.0], w[half]]),
-             np.concatenate([[0.0], nrows[0]]), np.concatenate([[0.0], nrows[1]]),
-             np.concatenate([[np.nan], nrows[2]]))
-            for i, theta, half, nrows in halves]
-    mu = normal_row_weight(fits) if turn_uv is not None else 0.0
+    mu = 0.0
+    if turn_uv is not None:
+        mu = normal_row_weight([(w[half],) + nrows for _, _, half, nrows in halves],
+                               (noise / radius) ** 2)
 
     kappas, rows, mixes, planes = [], [], [], set()
-    for (i, theta, half, nrows), (pts, _, wt, along_x, _, turn_x) in zip(halves, fits):
-        kappa, _ = fit_normal_circle(pts, n, wt, circle_normalization, along_x, turn_x, mu)
+    for i, theta, half, nrows in halves:
+        pts = np.vstack([np.zeros(3), q[half]])
+        wt = np.concatenate([[1.0], w[half]])
+        kappa, _ = fit_normal_circle(pts, n, wt, circle_normalization,
+                                     np.concatenate([[0.0], nrows[0]]),
+                                     np.concatenate([[np.nan], nrows[2]]), mu)
         if not np.isfinite(kappa):
             continue
         mix = sample_mix(r2[half], phi[half], wt, theta, *nrows, mu)

@@ -19,7 +19,7 @@ def sorted_ball_csr(points, radius):
 
 
 def run_kernel(v, normals, radius, point_normals, fit=(8, 0.25, 3.0, 0.25, False, True, False,
-                                                       True), blend=1.0, noise=0.0):
+                                                       True), blend=1.0, noise=0.0, gain=1.0):
     indptr, indices = sorted_ball_csr(v, radius)
     m = len(v)
     out = dict(k1=np.empty(m), k2=np.empty(m), d1=np.empty((m, 3)), d2=np.empty((m, 3)),
@@ -27,7 +27,8 @@ def run_kernel(v, normals, radius, point_normals, fit=(8, 0.25, 3.0, 0.25, False
                status=np.empty(m, dtype=np.int8))
     fused.curvature_cga(v, v, normals, indptr, indices, radius, np.full(m, blend), fit,
                         tuple(out.values()), None, point_normals, np.broadcast_to(
-                            np.asarray(noise, dtype=np.float64), (m,)).copy())
+                            np.asarray(noise, dtype=np.float64), (m,)).copy(),
+                        np.broadcast_to(np.asarray(gain, dtype=np.float64), (m,)).copy())
     return out, indptr, indices
 
 
@@ -55,12 +56,15 @@ def test_kernel_with_normals_matches_numpy_reference(options):
     query_normals = np.where(np.isfinite(nv), nv, s.normals)
     noise = rng.uniform(0.0, 0.02, len(v))
     noise[::53] = np.nan           # no noise measure: positions only
-    out, indptr, indices = run_kernel(v, query_normals, radius, nv, fit, opt["blend"], noise)
+    gain = rng.uniform(0.0, 1.0, len(v))
+    out, indptr, indices = run_kernel(v, query_normals, radius, nv, fit, opt["blend"], noise,
+                                      gain)
     checked = 0
     for i in range(0, len(v), 7):
         nb = indices[indptr[i]:indptr[i + 1]]
         ref = fused_spec.curvature_at_point(v[i], query_normals[i], v[nb], radius,
-                                            neighbor_normals=nv[nb], noise=noise[i], **opt)
+                                            neighbor_normals=nv[nb], noise=noise[i],
+                                            normal_gain=gain[i], **opt)
         for key in ("k1", "k2", "residual"):
             assert out[key][i] == pytest.approx(ref[key], rel=1e-9, abs=1e-9, nan_ok=True), key
         assert out["n_samples"][i] == ref["n_samples"]

@@ -25,7 +25,7 @@ __all__ = ["curvature_cga", "estimate_one", "sampling_planes", "cache_is_warm"]
 
 @njit(cache=True)
 def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, work, tu, tv,
-                 point_normals=None, noise=np.nan):
+                 point_normals=None, noise=np.nan, normal_gain=1.0):
     """Circle fits in 2 ndir half-sets around one point x, then the Euler model fit.
 
     Parameters
@@ -63,8 +63,8 @@ def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, wo
                                  (ca, sa), slab, acc, point_normals)
     mu = 0.0
     if point_normals is not None:
-        mu = normal_row_weight(acc, ndir, min_points, min_spread,
-                               (noise * inv_r) * (noise * inv_r))
+        mu = normal_gain * normal_row_weight(acc, ndir, min_points, min_spread,
+                                             (noise * inv_r) * (noise * inv_r))
     m, planes_seen = half_set_samples(acc, ndir, min_points, min_spread, unit_norm, corrected,
                                       dirs, kappa, rows, mix, active, b3, ev, mu)
     if planes_seen < 3 or m < 5:
@@ -119,7 +119,7 @@ def _write_directions(q, theta1, tu, tv, n, d1, d2):
 
 @njit(parallel=True, cache=True)
 def curvature_cga(points, query_points, query_normals, indptr, indices, radius, blend, opts,
-                  out, rank=None, point_normals=None, noise=None):
+                  out, rank=None, point_normals=None, noise=None, normal_gain=None):
     """Fused CGA circle-fit estimator over query points with CSR neighbor lists.
 
     Parameters
@@ -146,8 +146,9 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
         lowest-index rule then picks the same neighbor as on the input.
     point_normals : (n, 3) float64, optional, unit normals of ``points`` (same rows; NaN where
         unknown), and ``noise`` (m,) the position noise at each query point (model units, the
-        RMS height residual of :func:`meshcurv.fit.jet.local_jet`): the circle fits then also
-        fit the normals' turn (normal-aware circle fits; see :func:`estimate_one`).
+        RMS height residual of :func:`meshcurv.fit.jet.local_jet`) and ``normal_gain`` (m,) a
+        factor in [0, 1] on the normal rows' weight: the circle fits then also fit the normals'
+        turn (normal-aware circle fits; see :func:`estimate_one`).
         ``query_normals`` still sets each frame.
     """
     k1, k2, d1, d2, n_samples, residual, n_neighbors, status = out
@@ -183,7 +184,8 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
                 else:
                     e1, e2, theta1, used, rms, n_nbr, why = estimate_one(
                         points, indices, indptr[q], indptr[q + 1], x, n, rank, radius,
-                        blend[q], opts, planes, work, tu, tv, point_normals, noise[q])
+                        blend[q], opts, planes, work, tu, tv, point_normals, noise[q],
+                        normal_gain[q])
             if why == STATUS_OK and not np.isfinite(e1):
                 why = STATUS_ILL_POSED_FIT
             status[q] = why

@@ -19,7 +19,7 @@ __all__ = ["curvature_at_point"]
 def curvature_at_point(x, n, neighbors, radius, n_directions=8, slab=0.25, min_points=3,
                        min_spread=0.25, blend=1.0, circle_normalization="tangent",
                        section_blend=True, half_frequency=False, robust=True,
-                       neighbor_normals=None, noise=np.nan):
+                       neighbor_normals=None, noise=np.nan, normal_gain=1.0):
     """Principal curvatures at one point from its neighbors (the kernel's contract, in numpy).
 
     Parameters
@@ -37,7 +37,7 @@ def curvature_at_point(x, n, neighbors, radius, n_directions=8, slab=0.25, min_p
         (:func:`~meshcurv.fit.circle_spec.normal_turn_rows`, relative to the ball's weighted
         mean position and normal) weighted by
         :func:`~meshcurv.fit.circle_spec.normal_row_weight` from ``noise`` (model units, the
-        local cubic fit's RMS height residual)
+        local cubic fit's RMS height residual), times ``normal_gain``
 
     Returns
     -------
@@ -88,8 +88,8 @@ def curvature_at_point(x, n, neighbors, radius, n_directions=8, slab=0.25, min_p
     # x itself is in every half-set: position row (0, -1, 0), no normal row
     mu = 0.0
     if turn_uv is not None:
-        mu = normal_row_weight([(w[half],) + nrows for _, _, half, nrows in halves],
-                               (noise / radius) ** 2)
+        mu = normal_gain * normal_row_weight(
+            [(w[half],) + nrows for _, _, half, nrows in halves], (noise / radius) ** 2)
 
     kappas, rows, mixes, planes = [], [], [], set()
     for i, theta, half, nrows in halves:

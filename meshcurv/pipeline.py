@@ -277,7 +277,8 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, field_of
     those are clean, only the bias of their own neighborhoods (Table 2 paraboloid, radius 2:
     mean |dk1| 0.0015 -> 0.0021 at full weight); where there is noise they average it over a
     second neighborhood. Their rows' weight is scaled by ``1 - beta`` (beta the noise blend of
-    the weights, 1 on clean data); given normals keep theirs."""
+    the weights, 1 on clean data); given normals keep theirs, unless they are refined like
+    estimated ones (``refine_normals=True``: e.g. a tiled run's spanning-tree normals)."""
     b = len(xb)
     noise = np.empty(b)
     start = qb.copy() if plan.refine else None
@@ -293,7 +294,8 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, field_of
                         (k1, k2, d1, d2, samples, residual, nbrs, status), search.rank,
                         field_of_points, None if field_of_points is None else noise,
                         None if field_of_points is None else
-                        (np.ones(b) if plan.normals == "given" else 1.0 - beta))
+                        (np.ones(b) if plan.normals == "given" and not plan.refine
+                         else 1.0 - beta))
     out.k1[pos], out.k2[pos], out.d1[pos], out.d2[pos] = k1, k2, d1, d2
     out.normals[pos], out.n_samples[pos], out.residual[pos] = qb, samples, residual
     out.n_neighbors[pos], out.noise[pos], out.status[pos] = nbrs, noise, status

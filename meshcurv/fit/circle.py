@@ -13,15 +13,22 @@ from .constants import WEIGHT_POWER
 # needs B = sum w w^T over rows w = (h, -1, -r2/2): the weighted sums of 1, h, h^2, r2, h*r2,
 # r2^2. The sums of r2*cos2phi ... tell the sine fit which blend of directions a half-set really
 # saw (see ``sample_design``). _CNT counts the points, _EMAX is the farthest reach along the
-# plane's direction.
+# plane's direction. With a normal field, each neighbor p with normal n_p also gives a normal row
+# b = kappa a: a = (p - c) . e along the plane's direction e and b = (n_p - nbar) . e the turn
+# of its normal, both relative to the weighted means c, nbar of the ball's points and normals
+# (the first-order field n_p = nbar + S (p - c) holds whatever x's own normal is, and nbar is
+# far less noisy than one normal): the weighted sums of a, b, s (s = (p - c) . e_perp, across
+# the slab, for the direction mix of these rows), a^2, a b, b^2, a s, b s, s^2, the rows'
+# weight and count.
 _N, _H, _HH, _R, _HR, _RR, _RC, _RRC, _RS, _RRS, _CNT, _EMAX = range(12)
+_A, _B, _S, _AA, _AB, _BB, _AS, _BS, _SS, _NW, _NCNT = range(12, 23)
 
 
-N_ACC = 12
+N_ACC = 23
 
 
 @njit(cache=True)
-def sample_design(acc, k, corrected, cos2t, sin2t):
+def sample_design(acc, k, corrected, cos2t, sin2t, mu=0.0):
     """Regressors (cos 2theta, sin 2theta) of one circle-fit sample for the Euler model.
 
     Nominally (cos 2theta, sin 2theta) of the sample's plane direction theta. With
@@ -29,20 +36,35 @@ def sample_design(acc, k, corrected, cos2t, sin2t):
     order in the heights, the fitted curvature is sum_p w_p k(phi_p) / sum_p w_p with
     w_p = r2_p (r2_p - mean r2), so a slab of finite width samples a known blend of directions
     rather than theta alone, and the Euler model can be fitted to that blend exactly.
+
+    With normal rows of weight ``mu`` (see :func:`circle_fit`) the fitted curvature is the
+    mean of the position rows' (weight ``den / 4``, ``den`` below) and the normal rows' (weight
+    ``mu sum w a^2``). A normal row measures ``(S p) . e = a S(e, e) + s S(e_perp, e)`` for the
+    shape operator S, so these rows see (cos 2theta, sin 2theta) turned by
+    ``delta = sum w a s / sum w a^2``: ``(cos 2theta - delta sin 2theta, sin 2theta + delta cos
+    2theta)``, exactly for a linear normal field.
     """
     if not corrected:
         return cos2t, sin2t
     rbar = acc[k, _R] / acc[k, _N]
     den = acc[k, _RR] - rbar * acc[k, _R]
-    if den <= 0.0:
+    dn = mu * acc[k, _AA] if mu > 0.0 else 0.0
+    if den <= 0.0 and not dn > 0.0:
         return cos2t, sin2t
-    mc = (acc[k, _RRC] - rbar * acc[k, _RC]) / den
-    ms = (acc[k, _RRS] - rbar * acc[k, _RS]) / den
+    mc, ms, dp = cos2t, sin2t, 0.0
+    if den > 0.0:
+        mc = (acc[k, _RRC] - rbar * acc[k, _RC]) / den
+        ms = (acc[k, _RRS] - rbar * acc[k, _RS]) / den
+        dp = 0.25 * den
+    if dn > 0.0:
+        delta = acc[k, _AS] / acc[k, _AA]
+        mc = (dp * mc + dn * (cos2t - delta * sin2t)) / (dp + dn)
+        ms = (dp * ms + dn * (sin2t + delta * cos2t)) / (dp + dn)
     return mc, ms
 
 
 @njit(cache=True)
-def circle_fit(acc, k, unit_norm, b, ev):
+def circle_fit(acc, k, unit_norm, b, ev, mu=0.0):
     """CGA circle fit of half-set k from its accumulator row: kappa (scaled units), NaN if
     degenerate.
 
@@ -53,6 +75,10 @@ def circle_fit(acc, k, unit_norm, b, ev):
     2x2 system [[N, Sr/2], [Sr/2, Srr/4]] (t2, t3) = (Sh, Shr/2): the same sphere on exact data,
     but it cannot drift to the spheres centred at x (t1 -> 0) that send |kappa| to infinity
     under noise.
+
+    ``mu`` > 0 adds the half-set's normal rows ``b = kappa a`` with that weight relative to
+    the position rows: in t they read ``b t1 + a t3 = 0``, so B gains
+    ``mu [[Sbb, 0, Sab], [0, 0, 0], [Sab, 0, Saa]]``.
     """
     b11 = acc[k, _HH]
     b12 = -acc[k, _H]
@@ -60,6 +86,10 @@ def circle_fit(acc, k, unit_norm, b, ev):
     b22 = acc[k, _N]
     b23 = 0.5 * acc[k, _R]
     b33 = 0.25 * acc[k, _RR]
+    if mu > 0.0:
+        b11 += mu * acc[k, _BB]
+        b13 += mu * acc[k, _AB]
+        b33 += mu * acc[k, _AA]
     if unit_norm:
         b[0, 0], b[0, 1], b[0, 2] = b11, b12, b13
         b[1, 0], b[1, 1], b[1, 2] = b12, b22, b23
@@ -76,7 +106,7 @@ def circle_fit(acc, k, unit_norm, b, ev):
 
 @njit(cache=True)
 def accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta, planes, slab,
-                         acc):
+                         acc, point_normals=None):
     """Accumulate the neighbors ``points[nbr[lo:hi]]`` of x into the half-sets' sums; their count.
 
     Each neighbor within the ball (``r2max`` the squared radius, ``inv_r`` its inverse; model
@@ -85,6 +115,10 @@ def accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta, 
     zeroed here) of every half-set whose slab (half-width ``slab``) holds it: half-set i on
     the positive side of plane i's direction ``planes[0][i], planes[1][i]`` (cos, sin), i + ndir
     on the negative side. Returns the number of neighbors in the ball.
+
+    ``point_normals`` ((n, 3) unit, aligned with ``points``; NaN rows give no normal row) add
+    each neighbor's normal row, centred on the ball's weighted mean position and normal (a
+    normal facing away from n is turned round first).
     """
     ca, sa = planes[0], planes[1]
     ndir = ca.shape[0]
@@ -92,6 +126,8 @@ def accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta, 
         for c in range(N_ACC):
             acc[k, c] = 0.0
     n_nbr = 0
+    # weighted sums over the ball's normal rows: weight, u, v, bu, bv (the means c and nbar)
+    sw, su, sv, sbu, sbv = 0.0, 0.0, 0.0, 0.0, 0.0
     for j in range(lo, hi):
         inside, qx, qy, qz, r2 = ball_offset(points, nbr[j], x[0], x[1], x[2], r2max, inv_r)
         if not inside:
@@ -100,14 +136,60 @@ def accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta, 
         u = qx * tu[0] + qy * tu[1] + qz * tu[2]
         v = qx * tv[0] + qy * tv[1] + qz * tv[2]
         h = qx * n[0] + qy * n[1] + qz * n[2]
-        add_point(acc, u, v, h, r2, beta, ca, sa, slab)
+        bu, bv, has_normal = 0.0, 0.0, False
+        if point_normals is not None:
+            p = nbr[j]
+            sgn = 1.0
+            if (point_normals[p, 0] * n[0] + point_normals[p, 1] * n[1]
+                    + point_normals[p, 2] * n[2]) < 0.0:
+                sgn = -1.0
+            bu = sgn * (point_normals[p, 0] * tu[0] + point_normals[p, 1] * tu[1]
+                        + point_normals[p, 2] * tu[2])
+            bv = sgn * (point_normals[p, 0] * tv[0] + point_normals[p, 1] * tv[1]
+                        + point_normals[p, 2] * tv[2])
+            has_normal = np.isfinite(bu + bv) and u * u + v * v > 0.0
+            if has_normal:
+                w = (1.0 - beta) + beta * (1.0 - r2) ** WEIGHT_POWER
+                sw += w
+                su += w * u
+                sv += w * v
+                sbu += w * bu
+                sbv += w * bv
+        add_point(acc, u, v, h, r2, beta, ca, sa, slab, bu, bv, has_normal)
+    if sw > 0.0:
+        center_normal_rows(acc, ca, sa, su / sw, sv / sw, sbu / sw, sbv / sw)
     return n_nbr
 
 
 @njit(cache=True)
-def add_point(acc, u, v, h, r2, beta, ca, sa, slab):
+def center_normal_rows(acc, ca, sa, cu, cv, du, dv):
+    """Move the half-sets' normal-row sums from a = p . e, b = n_p . e, s = p . e_perp to the
+    ball's means: a - c . e, b - nbar . e, s - c . e_perp, with c = (cu, cv), nbar's tangent part
+    (du, dv) (the sums' first moments make this exact)."""
+    ndir = ca.shape[0]
+    for k in range(2 * ndir):
+        i = k % ndir
+        ce = ca[i] * cu + sa[i] * cv
+        cp = -sa[i] * cu + ca[i] * cv
+        de = ca[i] * du + sa[i] * dv
+        w, a, b, s = acc[k, _NW], acc[k, _A], acc[k, _B], acc[k, _S]
+        acc[k, _AA] += -2.0 * ce * a + ce * ce * w
+        acc[k, _AB] += -ce * b - de * a + ce * de * w
+        acc[k, _BB] += -2.0 * de * b + de * de * w
+        acc[k, _AS] += -ce * s - cp * a + ce * cp * w
+        acc[k, _BS] += -de * s - cp * b + de * cp * w
+        acc[k, _SS] += -2.0 * cp * s + cp * cp * w
+        acc[k, _A] = a - ce * w
+        acc[k, _B] = b - de * w
+        acc[k, _S] = s - cp * w
+
+
+@njit(cache=True)
+def add_point(acc, u, v, h, r2, beta, ca, sa, slab, bu=0.0, bv=0.0, has_normal=False):
     """Add one neighbor at frame coordinates (u, v, h), squared distance r2 (units of the
-    radius), to the accumulator rows of the half-sets whose slabs hold it."""
+    radius), to the accumulator rows of the half-sets whose slabs hold it; with
+    ``has_normal`` also its normal row, (bu, bv) the tangent components of n_p (before
+    :func:`center_normal_rows`)."""
     t2 = u * u + v * v
     if t2 <= 0.0:
         return
@@ -118,7 +200,8 @@ def add_point(acc, u, v, h, r2, beta, ca, sa, slab):
     wr = w * r2
     wrr = wr * r2
     for i in range(ndir):
-        if abs(-sa[i] * u + ca[i] * v) > slab:
+        s = -sa[i] * u + ca[i] * v
+        if abs(s) > slab:
             continue
         e = ca[i] * u + sa[i] * v
         k = i if e >= 0.0 else i + ndir
@@ -135,11 +218,60 @@ def add_point(acc, u, v, h, r2, beta, ca, sa, slab):
         acc[k, _CNT] += 1.0
         if abs(e) > acc[k, _EMAX]:
             acc[k, _EMAX] = abs(e)
+        if has_normal:
+            # along plane i's own direction on both sides: a, b and s all change sign with the
+            # side's direction, their products (all the fits use) do not
+            b = ca[i] * bu + sa[i] * bv
+            acc[k, _A] += w * e
+            acc[k, _B] += w * b
+            acc[k, _S] += w * s
+            acc[k, _AA] += w * e * e
+            acc[k, _AB] += w * e * b
+            acc[k, _BB] += w * b * b
+            acc[k, _AS] += w * e * s
+            acc[k, _BS] += w * b * s
+            acc[k, _SS] += w * s * s
+            acc[k, _NW] += w
+            acc[k, _NCNT] += 1.0
+
+
+@njit(cache=True)
+def normal_row_weight(acc, ndir, min_points, min_spread, height_var):
+    """Weight ``mu`` of the normal rows relative to the position rows in one point's circle
+    fits: the ratio of their noise variances (0 when there are no normal rows).
+
+    ``height_var`` is the position rows' (the squared noise of the local cubic height fit,
+    :func:`meshcurv.fit.jet.local_jet`, in units of the radius; NaN gives 0: positions only).
+    The normal rows' is their residual of ``b = kappa a + gamma s`` (gamma = S(e_perp, e), the
+    turn across the slab that :func:`sample_design` models, is not noise), pooled over the
+    half-sets that will be fitted: ``sum SSE / sum W (cnt - 2) / cnt`` (W the rows' weight, cnt
+    their number), the SSE a quadratic form of the sums. Measured, the position rows' own
+    residual is no measure of their noise: a frame tilted by a noisy normal and the slab's
+    blend of directions leave residuals that are not noise (with clean positions and normals
+    of sigma_xi 0.1 it gave normals 20x too much weight). The floor ``1e-12`` (1e-6 radius)
+    keeps the ratio defined on exact data.
+    """
+    if not np.isfinite(height_var):
+        return 0.0
+    sse_n = 0.0
+    dof_n = 0.0
+    for k in range(2 * ndir):
+        if acc[k, _CNT] < min_points or acc[k, _EMAX] < min_spread:
+            continue
+        saa, sas, sss, sab, sbs = acc[k, _AA], acc[k, _AS], acc[k, _SS], acc[k, _AB], acc[k, _BS]
+        dn = saa * sss - sas * sas
+        if dn > 1e-14 * saa * sss and acc[k, _NCNT] > 2.0:
+            fit = (sss * sab * sab - 2.0 * sas * sab * sbs + saa * sbs * sbs) / dn
+            sse_n += max(acc[k, _BB] - fit, 0.0)
+            dof_n += acc[k, _NW] * (acc[k, _NCNT] - 2.0) / acc[k, _NCNT]
+    if not dof_n > 0.0:
+        return 0.0
+    return (height_var + 1e-12) / (sse_n / dof_n + 1e-12)
 
 
 @njit(cache=True)
 def half_set_samples(acc, ndir, min_points, min_spread, unit_norm, corrected, dirs, kappa, rows,
-                     mix, active, b3, ev):
+                     mix, active, b3, ev, mu=0.0):
     """Circle fit of every half-set with enough points, as samples of the Euler model.
 
     A half-set is fitted when it holds ``min_points`` points reaching ``min_spread`` (units of
@@ -149,7 +281,7 @@ def half_set_samples(acc, ndir, min_points, min_spread, unit_norm, corrected, di
     in the second and third column with ``corrected``; ``dirs`` (2 ndir, 4) holds (cos, sin) of
     theta and 2 theta per half-set), its measured mix ``mix[s]`` and ``active[s] = 1``.
     ``b3`` (3, 3), ``ev`` (3,) are scratch. Returns ``(m, planes_seen)``: the samples and the
-    planes with at least one of them.
+    planes with at least one of them. ``mu``: the normal rows' weight (:func:`circle_fit`).
     """
     m = 0
     planes_seen = 0
@@ -160,11 +292,11 @@ def half_set_samples(acc, ndir, min_points, min_spread, unit_norm, corrected, di
             if acc[k, _CNT] < min_points or acc[k, _EMAX] < min_spread:
                 continue
             acc[k, _N] += 1.0
-            kap = circle_fit(acc, k, unit_norm, b3, ev)
+            kap = circle_fit(acc, k, unit_norm, b3, ev, mu)
             if not np.isfinite(kap):
                 continue
             kappa[m] = kap
-            mc, ms = sample_design(acc, k, True, dirs[k, 2], dirs[k, 3])
+            mc, ms = sample_design(acc, k, True, dirs[k, 2], dirs[k, 3], mu)
             mix[m, 0] = mc
             mix[m, 1] = ms
             dc, ds = (mc, ms) if corrected else (dirs[k, 2], dirs[k, 3])

@@ -13,7 +13,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..linalg import CHUNK
-from .circle import N_ACC, accumulate_half_sets, half_set_samples
+from .circle import N_ACC, accumulate_half_sets, half_set_samples, normal_row_weight
 from .constants import (MIN_DIRECTION_SPREAD, PLANE_OFFSET, STATUS_DEGENERATE_DIRECTIONS,
                         STATUS_ILL_POSED_FIT, STATUS_NO_NORMAL, STATUS_NO_POSITION, STATUS_OK,
                         STATUS_TOO_FEW_HALF_SETS, STATUS_TOO_FEW_NEIGHBORS)
@@ -24,7 +24,8 @@ __all__ = ["curvature_cga", "estimate_one", "sampling_planes", "cache_is_warm"]
 
 
 @njit(cache=True)
-def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, work, tu, tv):
+def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, work, tu, tv,
+                 point_normals=None, noise=np.nan, normal_gain=1.0):
     """Circle fits in 2 ndir half-sets around one point x, then the Euler model fit.
 
     Parameters
@@ -39,6 +40,10 @@ def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, wo
     work : ``(acc, kappa, rows, active, scratch, mat, rhs, sol, b3, ev, mix)`` scratch arrays
         (see :func:`curvature_cga`)
     tu, tv : (3,) float64 outputs, the tangent frame
+    point_normals : (n, 3) float64 unit normals aligned with ``points``, or None: each circle
+        fit then also fits its neighbors' normals
+        (:func:`meshcurv.fit.circle.circle_fit`), weighted by
+        :func:`meshcurv.fit.circle.normal_row_weight`.
 
     Returns
     -------
@@ -55,9 +60,13 @@ def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, wo
     r2max = radius * radius
     tangent_frame(points, nbr, lo, hi, x, n, r2max, tu, tv, rank)
     n_nbr = accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta,
-                                 (ca, sa), slab, acc)
+                                 (ca, sa), slab, acc, point_normals)
+    mu = 0.0
+    if point_normals is not None:
+        mu = normal_gain * normal_row_weight(acc, ndir, min_points, min_spread,
+                                             (noise * inv_r) * (noise * inv_r))
     m, planes_seen = half_set_samples(acc, ndir, min_points, min_spread, unit_norm, corrected,
-                                      dirs, kappa, rows, mix, active, b3, ev)
+                                      dirs, kappa, rows, mix, active, b3, ev, mu)
     if planes_seen < 3 or m < 5:
         why = STATUS_TOO_FEW_NEIGHBORS if n_nbr < min_points else STATUS_TOO_FEW_HALF_SETS
         return np.nan, np.nan, np.nan, m, np.nan, n_nbr, why
@@ -110,7 +119,7 @@ def _write_directions(q, theta1, tu, tv, n, d1, d2):
 
 @njit(parallel=True, cache=True)
 def curvature_cga(points, query_points, query_normals, indptr, indices, radius, blend, opts,
-                  out, rank=None):
+                  out, rank=None, point_normals=None, noise=None, normal_gain=None):
     """Fused CGA circle-fit estimator over query points with CSR neighbor lists.
 
     Parameters
@@ -135,6 +144,12 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
     rank : (n,) int64, optional, the input index of each row of ``points`` when they are stored
         in another order (e.g. a grid's sorted copy, for memory locality): the tangent frame's
         lowest-index rule then picks the same neighbor as on the input.
+    point_normals : (n, 3) float64, optional, unit normals of ``points`` (same rows; NaN where
+        unknown), and ``noise`` (m,) the position noise at each query point (model units, the
+        RMS height residual of :func:`meshcurv.fit.jet.local_jet`) and ``normal_gain`` (m,) a
+        factor in [0, 1] on the normal rows' weight: the circle fits then also fit the normals'
+        turn (normal-aware circle fits; see :func:`estimate_one`).
+        ``query_normals`` still sets each frame.
     """
     k1, k2, d1, d2, n_samples, residual, n_neighbors, status = out
     ndir = opts[0]
@@ -162,9 +177,15 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
             if nn > 0.0 and np.isfinite(nn) and np.isfinite(x[0] + x[1] + x[2]):
                 for a in range(3):
                     n[a] /= nn
-                e1, e2, theta1, used, rms, n_nbr, why = estimate_one(
-                    points, indices, indptr[q], indptr[q + 1], x, n, rank, radius, blend[q],
-                    opts, planes, work, tu, tv)
+                if point_normals is None:
+                    e1, e2, theta1, used, rms, n_nbr, why = estimate_one(
+                        points, indices, indptr[q], indptr[q + 1], x, n, rank, radius,
+                        blend[q], opts, planes, work, tu, tv)
+                else:
+                    e1, e2, theta1, used, rms, n_nbr, why = estimate_one(
+                        points, indices, indptr[q], indptr[q + 1], x, n, rank, radius,
+                        blend[q], opts, planes, work, tu, tv, point_normals, noise[q],
+                        normal_gain[q])
             if why == STATUS_OK and not np.isfinite(e1):
                 why = STATUS_ILL_POSED_FIT
             status[q] = why

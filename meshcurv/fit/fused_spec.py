@@ -8,7 +8,7 @@ Slow and readable: the paper's steps for a single point, built from the other sp
 
 import numpy as np
 
-from .circle_spec import fit_normal_circle, sample_mix
+from .circle_spec import fit_normal_circle, normal_row_weight, normal_turn_rows, sample_mix
 from .constants import MIN_DIRECTION_SPREAD, PLANE_OFFSET, WEIGHT_POWER
 from .euler_spec import direction_spread, fit_euler
 from .frame_spec import tangent_u
@@ -18,7 +18,8 @@ __all__ = ["curvature_at_point"]
 
 def curvature_at_point(x, n, neighbors, radius, n_directions=8, slab=0.25, min_points=3,
                        min_spread=0.25, blend=1.0, circle_normalization="tangent",
-                       section_blend=True, half_frequency=False, robust=True):
+                       section_blend=True, half_frequency=False, robust=True,
+                       neighbor_normals=None, noise=np.nan, normal_gain=1.0):
     """Principal curvatures at one point from its neighbors (the kernel's contract, in numpy).
 
     Parameters
@@ -31,6 +32,12 @@ def curvature_at_point(x, n, neighbors, radius, n_directions=8, slab=0.25, min_p
     blend : float in [0, 1], weights ``(1 - blend) + blend (1 - r^2 / radius^2)^WEIGHT_POWER``
         (see :func:`meshcurv.pipeline.weight_blend`)
     other parameters : as in :func:`meshcurv.principal_curvatures`
+    neighbor_normals : (k, 3) float, optional, unit normals of ``neighbors`` (NaN: unknown):
+        normal-aware circle fits, each half-set's normal rows
+        (:func:`~meshcurv.fit.circle_spec.normal_turn_rows`, relative to the ball's weighted
+        mean position and normal) weighted by
+        :func:`~meshcurv.fit.circle_spec.normal_row_weight` from ``noise`` (model units, the
+        local cubic fit's RMS height residual), times ``normal_gain``
 
     Returns
     -------
@@ -42,7 +49,8 @@ def curvature_at_point(x, n, neighbors, radius, n_directions=8, slab=0.25, min_p
     n = n / np.linalg.norm(n)
     q = np.asarray(neighbors, dtype=np.float64) - x
     d2 = np.einsum("ij,ij->i", q, q)
-    q = q[(d2 > 0) & (d2 <= radius * radius)]
+    inball = (d2 > 0) & (d2 <= radius * radius)
+    q = q[inball]
     tu = tangent_u(q, n)
     tv = np.cross(n, tu)
     q = q / radius  # all fits in units of the radius
@@ -52,8 +60,18 @@ def curvature_at_point(x, n, neighbors, radius, n_directions=8, slab=0.25, min_p
     r2 = np.einsum("ij,ij->i", q, q)
     phi = np.arctan2(v, u)
     w = (1 - blend) + blend * (1 - r2) ** WEIGHT_POWER
+    turn_uv = None
+    if neighbor_normals is not None:
+        nb = np.asarray(neighbor_normals, dtype=np.float64)[inball][keep]
+        nb = np.where((nb @ n < 0)[:, None], -nb, nb)     # turned round to face like n
+        turn_uv = np.column_stack([nb @ tu, nb @ tv])
+        has = np.isfinite(turn_uv).all(axis=1)
+        uv = np.column_stack([u, v])
+        if has.any():    # relative to the ball's weighted mean position and normal
+            uv = uv - np.average(uv[has], axis=0, weights=w[has])
+            turn_uv = turn_uv - np.average(turn_uv[has], axis=0, weights=w[has])
 
-    kappas, rows, mixes, planes = [], [], [], set()
+    halves = []
     for i in range(n_directions):
         alpha = (i + PLANE_OFFSET) * np.pi / n_directions
         dist = -np.sin(alpha) * u + np.cos(alpha) * v    # distance to plane i (through x)
@@ -62,19 +80,33 @@ def curvature_at_point(x, n, neighbors, radius, n_directions=8, slab=0.25, min_p
         for side, half in enumerate([in_slab & (along >= 0), in_slab & (along < 0)]):
             if half.sum() < min_points or np.abs(along[half]).max(initial=0) < min_spread:
                 continue
-            pts = np.vstack([np.zeros(3), q[half]])          # x itself is in every half-set
-            wt = np.concatenate([[1.0], w[half]])
-            kappa, _ = fit_normal_circle(pts, n, wt, circle_normalization)
-            if not np.isfinite(kappa):
-                continue
             theta = alpha + side * np.pi
-            mix = sample_mix(r2[half], phi[half], wt, theta)
-            c, s = mix if section_blend else (np.cos(2 * theta), np.sin(2 * theta))
-            row = [1.0, c, s] + ([np.cos(theta), np.sin(theta)] if half_frequency else [])
-            kappas.append(kappa)
-            rows.append(row)
-            mixes.append(mix)
-            planes.add(i)
+            nrows = (np.zeros(half.sum()), np.zeros(half.sum()), np.full(half.sum(), np.nan))
+            if turn_uv is not None:
+                nrows = normal_turn_rows(uv[half], turn_uv[half], theta)
+            halves.append((i, theta, half, nrows))
+    # x itself is in every half-set: position row (0, -1, 0), no normal row
+    mu = 0.0
+    if turn_uv is not None:
+        mu = normal_gain * normal_row_weight(
+            [(w[half],) + nrows for _, _, half, nrows in halves], (noise / radius) ** 2)
+
+    kappas, rows, mixes, planes = [], [], [], set()
+    for i, theta, half, nrows in halves:
+        pts = np.vstack([np.zeros(3), q[half]])
+        wt = np.concatenate([[1.0], w[half]])
+        kappa, _ = fit_normal_circle(pts, n, wt, circle_normalization,
+                                     np.concatenate([[0.0], nrows[0]]),
+                                     np.concatenate([[np.nan], nrows[2]]), mu)
+        if not np.isfinite(kappa):
+            continue
+        mix = sample_mix(r2[half], phi[half], wt, theta, *nrows, mu)
+        c, s = mix if section_blend else (np.cos(2 * theta), np.sin(2 * theta))
+        row = [1.0, c, s] + ([np.cos(theta), np.sin(theta)] if half_frequency else [])
+        kappas.append(kappa)
+        rows.append(row)
+        mixes.append(mix)
+        planes.add(i)
     out = dict(k1=np.nan, k2=np.nan, d1=np.full(3, np.nan), n_samples=len(kappas),
                residual=np.nan)
     if len(planes) < 3 or len(kappas) < 5:

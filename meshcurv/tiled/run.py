@@ -160,6 +160,12 @@ def _curvature_stage(stages, names, tiles, flips, report):
     report.tile_stats.update(stages.run(jobs, "tiles", "tile"))
 
 
+def _halo_reach(options):
+    """Radii the halo covers: 2 with normal-aware circle fits (a neighbor's estimated normal
+    needs its own full ball), else 1."""
+    return 1 if options.get("normal_constraints", "auto") == "off" else 2
+
+
 def annotate_tiled(in_path, out_path, radius=None, tile_size=None, *, orientation="mst",
                    scheduler=None, n_workers=None, chunk_size=500_000, work_dir=None,
                    keep_work=False, progress=True, float_type="f8", measure_memory=False,
@@ -230,7 +236,7 @@ def annotate_tiled(in_path, out_path, radius=None, tile_size=None, *, orientatio
     if tile_size is None:
         tile_size = default_tile_size(n_points, maxs[:2] - mins[:2], radius)
     tile_size = _positive_length("tile_size", tile_size)
-    grid = TileGrid.for_radius(mins[:2], tile_size, radius)
+    grid = TileGrid.for_radius(mins[:2], tile_size, radius, _halo_reach(options))
     work = os.path.abspath(work_dir or out_path + ".meshcurv-work")
     st = os.stat(in_path)
     manifest = {"input": in_path, "size": st.st_size, "mtime_ns": st.st_mtime_ns,
@@ -344,7 +350,7 @@ def principal_curvatures_tiled(vertices, radius, tile_size, normals=None, *, ori
     chunk_size = _positive_count("chunk_size", chunk_size)
     finite = np.isfinite(v).all(axis=1)
     origin = v[finite, :2].min(axis=0) if finite.any() else np.zeros(2)
-    grid = TileGrid.for_radius(origin, tile_size, radius)
+    grid = TileGrid.for_radius(origin, tile_size, radius, _halo_reach(options))
     n = len(v)
     report = TiledReport(n_points=n, n_tiles=0, radius=radius, tile_size=tile_size, halo=grid.halo)
     with contextlib.ExitStack() as stack:

@@ -15,7 +15,7 @@ __all__ = ["Options", "OPTION_NAMES", "CHOICES", "MAX_DIRECTIONS", "check_option
 # Research switches of the estimator: the fields of Options, in order.
 SWITCH_NAMES = ("slab", "min_points", "min_spread", "weighting", "circle_normalization",
                 "section_blend", "robust", "half_frequency", "normal_estimation",
-                "refine_normals", "orientation")
+                "refine_normals", "orientation", "robust_points")
 # Every option of principal_curvatures besides the data (vertices, faces, normals) and the
 # call's own arguments (options, query, progress): its three public knobs and the switches.
 OPTION_NAMES = ("radius", "n_directions", "neighborhood") + SWITCH_NAMES
@@ -133,6 +133,15 @@ class Options:
         Global orientation of estimated point-cloud normals: "mst" propagates along a minimum
         spanning tree and then turns each connected piece away from its own centroid; a (3,)
         point orients every normal towards it (a scanner position).
+    robust_points : bool, default True
+        Down-weight stray points (scanner spikes) in every fit: each point gets an outlier
+        score, its distance from a robust (Tukey-reweighted) cubic fit of its neighborhood over
+        the neighborhood's robust noise scale (:mod:`meshcurv.fit.outliers`), and the weight
+        ``(1 - (score / 4.685)^2)^2`` (0 beyond) multiplies its weight in the normals, the
+        local jet and the circle fits. Points scoring above 4.685 are flagged
+        (``Status.OUTLIER``, no curvature). With 2 % of a noisy sphere's vertices pushed 1-4 %
+        of the diagonal off it, the vertices off by more than 10 % drop from 45 % to under 1 %;
+        clean surfaces are not flagged anywhere. Costs one more pass over the points.
 
     Examples
     --------
@@ -155,6 +164,7 @@ class Options:
     normal_estimation: str = "auto"
     refine_normals: object = None
     orientation: object = "mst"
+    robust_points: bool = True
 
     def __post_init__(self):
         check_options(**self.as_dict())
@@ -192,6 +202,7 @@ class Plan(NamedTuple):
     of all points first, oriented along a spanning tree). ``refine``: quadric-refined normals.
     ``weighting``: as the option. ``fit``: the fused kernel's settings ``(n_directions, slab,
     min_points, min_spread, unit_norm, section_blend, half_frequency, robust)``, typed.
+    ``robust_points``: the point-outlier pass and its weights.
     """
 
     use_kring: bool
@@ -200,13 +211,14 @@ class Plan(NamedTuple):
     refine: bool
     weighting: str
     fit: tuple
+    robust_points: bool = True
 
 
 def resolve_plan(has_faces, has_normals, n_directions=8, neighborhood="auto", slab=0.25,
                  min_points=3, min_spread=0.25, weighting="auto",
                  circle_normalization="tangent", section_blend=True, robust=True,
                  half_frequency=False, normal_estimation="auto", refine_normals=None,
-                 orientation="mst"):
+                 orientation="mst", robust_points=True):
     """The :class:`Plan` of a call with these options (the defaults of
     :func:`meshcurv.principal_curvatures`) on input with or without faces and given normals.
 
@@ -237,4 +249,5 @@ def resolve_plan(has_faces, has_normals, n_directions=8, neighborhood="auto", sl
            circle_normalization == "unit", bool(section_blend), bool(half_frequency),
            bool(robust))
     refine = not has_normals if refine_normals is None else bool(refine_normals)
-    return Plan(has_faces and neighborhood != "ball", normals, viewpoint, refine, weighting, fit)
+    return Plan(has_faces and neighborhood != "ball", normals, viewpoint, refine, weighting, fit,
+                bool(robust_points))

@@ -12,15 +12,16 @@ import numpy as np
 from scipy.spatial import cKDTree
 from tqdm.auto import tqdm
 
-from .fit import fused, jet
+from .fit import fused, jet, outliers
+from .fit.constants import TUKEY_C
 from .neighbors import (BallGrid, KringWork, ball_counts, ball_grid, ball_neighbors,
                         edge_adjacency, kring_counts, kring_neighbors, spatial_order)
 from .normals import face_vertex_normals, orient, orient_like, orient_mst, orient_towards, \
     pca_normals
-from .result import CurvatureResult
+from .result import CurvatureResult, Status
 
 __all__ = ["run", "estimate_normals", "weight_blend", "Search", "ball_search", "kring_search",
-           "block_size", "blocks", "mst_normals", "BLOCK", "BLOCK_ENTRIES", "MAX_PAIRS",
+           "block_size", "blocks", "mst_normals", "outlier_scores", "BLOCK", "BLOCK_ENTRIES", "MAX_PAIRS",
            "NOISE_SCALE"]
 
 # Query points per call into the kernels: bounds the memory of the neighbor lists (about
@@ -158,9 +159,38 @@ def kring_search(v, f, radius):
     return Search(neighbors, counts, v, None)
 
 
-def mst_normals(v, radius, search, progress, block=BLOCK):
+def outlier_scores(v, radius, search, rows, progress, block=BLOCK):
+    """Outlier scores (n,) of the points ``v[rows]`` (NaN elsewhere): each one's residual from
+    a robust cubic fit of its neighborhood over the fit's robust scale
+    (:func:`meshcurv.fit.outliers.point_residuals`)."""
+    score = np.full(len(v), np.nan)
+    for pos in blocks(rows, progress, "outliers", block):
+        indptr, indices = search.neighbors(pos)
+        residual, scale = np.empty(len(pos)), np.empty(len(pos))
+        outliers.point_residuals(search.points, v[pos], indptr, indices, radius, residual, scale)
+        score[pos] = residual / scale
+    return score
+
+
+def _scored_rows(v, search, query, finite, block):
+    """The vertices whose outlier scores the estimates at ``query`` use: every finite one, or,
+    for a few queries, those and their neighbors."""
+    if finite is None:
+        finite = np.flatnonzero(np.isfinite(v).all(axis=1))
+    if len(query) >= len(finite) // 4:
+        return finite
+    parts = [query]
+    for s in range(0, len(query), block):
+        rows = np.unique(search.neighbors(query[s:s + block])[1])
+        parts.append(rows if search.rank is None else search.rank[rows])
+    rows = np.unique(np.concatenate(parts))
+    return rows[np.isfinite(v[rows]).all(axis=1)]
+
+
+def mst_normals(v, radius, search, progress, block=BLOCK, point_weights=None):
     """PCA normals of every point, oriented along a spanning tree whose graph joins each point
-    to its nearest neighbors, taken from the search's lists (see :func:`ball_search`)."""
+    to its nearest neighbors, taken from the search's lists (see :func:`ball_search`);
+    ``point_weights`` (per row of ``search.points``) weight the plane fits."""
     n = len(v)
     nv = np.full((n, 3), np.nan)
     graph = np.full((n, _TREE_NEIGHBORS), -1, dtype=np.int32)
@@ -169,7 +199,7 @@ def mst_normals(v, radius, search, progress, block=BLOCK):
     order = rank if rank is not None else spatial_order(v, radius)
     for pos in blocks(order, progress, "normals", block):
         indptr, indices = search.neighbors(pos)
-        nv[pos] = pca_normals(search.points, v[pos], indptr, indices, radius)
+        nv[pos] = pca_normals(search.points, v[pos], indptr, indices, radius, point_weights)
         near = orient.nearest_in_lists(search.points, v[pos], indptr, indices, _TREE_NEIGHBORS)
         graph[pos] = near if rank is None else np.where(near >= 0, rank[near], -1)
     return orient_mst(v, nv, neighbors=graph)
@@ -182,13 +212,14 @@ def estimate_normals(v, radius, progress=False):
     return _spanning_tree_normals(v, radius, ball_search(v, finite, radius), finite, progress)
 
 
-def _spanning_tree_normals(v, radius, search, finite, progress):
+def _spanning_tree_normals(v, radius, search, finite, progress, point_weights=None):
     """:func:`mst_normals` of the ``finite`` (k,) rows of ``v`` over the ball ``search``, in
     blocks sized for their neighbor lists."""
-    return mst_normals(v, radius, search, progress, block_size(search, finite, radius, "points"))
+    return mst_normals(v, radius, search, progress, block_size(search, finite, radius, "points"),
+                       point_weights)
 
 
-def _start_normals(v, f, given, radius, search, finite, plan, progress):
+def _start_normals(v, f, given, radius, search, finite, plan, progress, point_weights=None):
     """``(normals, face_normals)`` before the blocks: the given ones, the faces', or the
     spanning tree's (which needs every normal first); None where blocks estimate their own.
     ``finite``: the finite rows of ``v`` (ball searches only)."""
@@ -199,17 +230,18 @@ def _start_normals(v, f, given, radius, search, finite, plan, progress):
         with np.errstate(invalid="ignore"):       # NaN vertices give NaN normals
             face_normals = face_vertex_normals(v, f)
     if plan.normals == "mst":
-        return _spanning_tree_normals(v, radius, search, finite, progress), None
+        return _spanning_tree_normals(v, radius, search, finite, progress, point_weights), None
     return (face_normals if plan.normals == "faces" else None), face_normals
 
 
-def _block_normals(nv, face_normals, idx, xb, indptr, indices, radius, search, plan):
+def _block_normals(nv, face_normals, idx, xb, indptr, indices, radius, search, plan,
+                   point_weights=None):
     """Unit normals of one block: taken from ``nv``, or PCA plane fits oriented like the face
     normals or towards the viewpoint."""
     if nv is not None:
         qb = nv[idx]
     else:
-        qb = pca_normals(search.points, xb, indptr, indices, radius)
+        qb = pca_normals(search.points, xb, indptr, indices, radius, point_weights)
         if face_normals is not None:
             orient_like(qb, face_normals[idx])
         else:
@@ -227,21 +259,33 @@ class _Outputs:
         self.n_samples = np.zeros(m, dtype=np.int32)
         self.n_neighbors = np.zeros(m, dtype=np.int32)
         self.status = np.zeros(m, dtype=np.int8)
+        self.outlier_score = np.full(m, np.nan)
+
+    def flag_outliers(self):
+        """No curvature, status OUTLIER, where the outlier score reaches the Tukey cutoff (the
+        points of weight 0 in their neighbors' fits)."""
+        with np.errstate(invalid="ignore"):
+            out = self.outlier_score >= TUKEY_C
+        for a in (self.k1, self.k2, self.d1, self.d2, self.residual):
+            a[out] = np.nan
+        self.status[out] = Status.OUTLIER
 
     def result(self, radius):
         return CurvatureResult(k1=self.k1, k2=self.k2, d1=self.d1, d2=self.d2,
                                normals=self.normals, valid=np.isfinite(self.k1),
                                n_neighbors=self.n_neighbors, n_samples=self.n_samples,
                                residual=self.residual, noise=self.noise, radius=radius,
-                               status=self.status)
+                               status=self.status, outlier_score=self.outlier_score)
 
 
-def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan):
-    """Local jet (noise, refined normal) and the fused fits of one block, into ``out[pos]``."""
+def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, point_weights=None):
+    """Local jet (noise, refined normal) and the fused fits of one block, into ``out[pos]``;
+    ``point_weights`` (per row of ``search.points``) weight the neighbors in both."""
     b = len(xb)
     noise = np.empty(b)
     start = qb.copy() if plan.refine else None
-    jet.local_jet(search.points, xb, qb, indptr, indices, radius, plan.refine, noise)
+    jet.local_jet(search.points, xb, qb, indptr, indices, radius, plan.refine, noise,
+                  point_weights)
     beta = weight_blend(noise, radius, "auto")
     if plan.refine:
         qb = _mix_normals(start, qb, beta)
@@ -250,7 +294,8 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan):
     status = np.empty(b, dtype=np.int8)
     blend = beta if plan.weighting == "auto" else weight_blend(noise, radius, plan.weighting)
     fused.curvature_cga(search.points, xb, qb, indptr, indices, radius, blend, plan.fit,
-                        (k1, k2, d1, d2, samples, residual, nbrs, status), search.rank)
+                        (k1, k2, d1, d2, samples, residual, nbrs, status), search.rank,
+                        point_weights)
     out.k1[pos], out.k2[pos], out.d1[pos], out.d2[pos] = k1, k2, d1, d2
     out.normals[pos], out.n_samples[pos], out.residual[pos] = qb, samples, residual
     out.n_neighbors[pos], out.noise[pos], out.status[pos] = nbrs, noise, status
@@ -277,8 +322,15 @@ def run(v, f, given_normals, radius, query, plan, progress=False):
         search = ball_search(v, finite, radius)
     # work per query from a sample: smaller blocks for large balls, an error for infeasible ones
     block = block_size(search, query, radius, "vertices" if f is not None else "points")
+    score = point_weights = None
+    if plan.robust_points:
+        # scores by vertex; weights by row of search.points (the grid's order where it has one)
+        score = outlier_scores(v, radius, search, _scored_rows(v, search, query, finite, block),
+                               progress, block)
+        weight = outliers.outlier_weight(score)
+        point_weights = weight if search.rank is None else weight[search.rank]
     nv, face_normals = _start_normals(v, f, given_normals, radius, search, finite, plan,
-                                      progress)
+                                      progress, point_weights)
     out = _Outputs(len(query))
     # queries by grid cell for ball queries (the points a block touches then stay in cache);
     # as given for k-rings, whose memory accesses follow the mesh's own numbering
@@ -287,7 +339,11 @@ def run(v, f, given_normals, radius, query, plan, progress=False):
         idx = query[pos]
         xb = v[idx]
         indptr, indices = search.neighbors(idx)
-        qb = _block_normals(nv, face_normals, idx, xb, indptr, indices, radius, search, plan)
-        _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan)
+        qb = _block_normals(nv, face_normals, idx, xb, indptr, indices, radius, search, plan,
+                            point_weights)
+        _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, point_weights)
         del indptr, indices
+    if score is not None:
+        out.outlier_score[:] = score[query]
+        out.flag_outliers()
     return out.result(radius)

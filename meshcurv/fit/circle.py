@@ -76,7 +76,7 @@ def circle_fit(acc, k, unit_norm, b, ev):
 
 @njit(cache=True)
 def accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta, planes, slab,
-                         acc):
+                         acc, point_weights=None):
     """Accumulate the neighbors ``points[nbr[lo:hi]]`` of x into the half-sets' sums; their count.
 
     Each neighbor within the ball (``r2max`` the squared radius, ``inv_r`` its inverse; model
@@ -84,7 +84,9 @@ def accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta, 
     ``(1 - beta) + beta (1 - r^2)^WEIGHT_POWER``, to the row of ``acc`` ((2 ndir, N_ACC),
     zeroed here) of every half-set whose slab (half-width ``slab``) holds it: half-set i on
     the positive side of plane i's direction ``planes[0][i], planes[1][i]`` (cos, sin), i + ndir
-    on the negative side. Returns the number of neighbors in the ball.
+    on the negative side. Returns the number of neighbors in the ball. ``point_weights`` (n,)
+    in [0, 1], optional (the outlier pass's): multiplies each neighbor's weight; neighbors of
+    weight 0 are counted in the ball but join no half-set.
     """
     ca, sa = planes[0], planes[1]
     ndir = ca.shape[0]
@@ -97,22 +99,26 @@ def accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta, 
         if not inside:
             continue
         n_nbr += 1
+        pw = 1.0 if point_weights is None else point_weights[nbr[j]]
+        if pw <= 0.0:
+            continue
         u = qx * tu[0] + qy * tu[1] + qz * tu[2]
         v = qx * tv[0] + qy * tv[1] + qz * tv[2]
         h = qx * n[0] + qy * n[1] + qz * n[2]
-        add_point(acc, u, v, h, r2, beta, ca, sa, slab)
+        add_point(acc, u, v, h, r2, beta, ca, sa, slab, pw)
     return n_nbr
 
 
 @njit(cache=True)
-def add_point(acc, u, v, h, r2, beta, ca, sa, slab):
+def add_point(acc, u, v, h, r2, beta, ca, sa, slab, point_weight=1.0):
     """Add one neighbor at frame coordinates (u, v, h), squared distance r2 (units of the
-    radius), to the accumulator rows of the half-sets whose slabs hold it."""
+    radius), to the accumulator rows of the half-sets whose slabs hold it; its weight is
+    multiplied by ``point_weight``."""
     t2 = u * u + v * v
     if t2 <= 0.0:
         return
     ndir = ca.shape[0]
-    w = (1.0 - beta) + beta * (1.0 - r2) ** WEIGHT_POWER
+    w = ((1.0 - beta) + beta * (1.0 - r2) ** WEIGHT_POWER) * point_weight
     c2 = (u * u - v * v) / t2
     s2 = 2.0 * u * v / t2
     wr = w * r2

@@ -24,7 +24,8 @@ __all__ = ["curvature_cga", "estimate_one", "sampling_planes", "cache_is_warm"]
 
 
 @njit(cache=True)
-def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, work, tu, tv):
+def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, work, tu, tv,
+                 point_weights=None):
     """Circle fits in 2 ndir half-sets around one point x, then the Euler model fit.
 
     Parameters
@@ -39,6 +40,7 @@ def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, wo
     work : ``(acc, kappa, rows, active, scratch, mat, rhs, sol, b3, ev, mix)`` scratch arrays
         (see :func:`curvature_cga`)
     tu, tv : (3,) float64 outputs, the tangent frame
+    point_weights : (n,) float64 in [0, 1] or None, see :func:`curvature_cga`
 
     Returns
     -------
@@ -55,7 +57,7 @@ def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, wo
     r2max = radius * radius
     tangent_frame(points, nbr, lo, hi, x, n, r2max, tu, tv, rank)
     n_nbr = accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta,
-                                 (ca, sa), slab, acc)
+                                 (ca, sa), slab, acc, point_weights)
     m, planes_seen = half_set_samples(acc, ndir, min_points, min_spread, unit_norm, corrected,
                                       dirs, kappa, rows, mix, active, b3, ev)
     if planes_seen < 3 or m < 5:
@@ -110,7 +112,7 @@ def _write_directions(q, theta1, tu, tv, n, d1, d2):
 
 @njit(parallel=True, cache=True)
 def curvature_cga(points, query_points, query_normals, indptr, indices, radius, blend, opts,
-                  out, rank=None):
+                  out, rank=None, point_weights=None):
     """Fused CGA circle-fit estimator over query points with CSR neighbor lists.
 
     Parameters
@@ -135,6 +137,9 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
     rank : (n,) int64, optional, the input index of each row of ``points`` when they are stored
         in another order (e.g. a grid's sorted copy, for memory locality): the tangent frame's
         lowest-index rule then picks the same neighbor as on the input.
+    point_weights : (n,) float64 in [0, 1], optional, per row of ``points``: multiplies each
+        neighbor's weight in the circle fits (the outlier pass's weights,
+        :func:`meshcurv.fit.outliers.outlier_weight`); default 1.
     """
     k1, k2, d1, d2, n_samples, residual, n_neighbors, status = out
     ndir = opts[0]
@@ -164,7 +169,7 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
                     n[a] /= nn
                 e1, e2, theta1, used, rms, n_nbr, why = estimate_one(
                     points, indices, indptr[q], indptr[q + 1], x, n, rank, radius, blend[q],
-                    opts, planes, work, tu, tv)
+                    opts, planes, work, tu, tv, point_weights)
             if why == STATUS_OK and not np.isfinite(e1):
                 why = STATUS_ILL_POSED_FIT
             status[q] = why

@@ -1,4 +1,4 @@
-"""Point outliers: each point's residual from a robust cubic fit of its neighborhood, over the
+"""Point outliers: each point's residual from a robust height fit of its neighborhood, over the
 neighborhood's robust noise scale, and the Tukey weight that follows. Compiled kernel
 :func:`point_residuals`; its numpy specification is
 :func:`meshcurv.fit.outliers_spec.point_residual`.
@@ -15,27 +15,29 @@ from numba import njit, prange
 
 from ..linalg import CHUNK, ball_offset, smallest_eigvec_jacobi3, solve_sym
 from .constants import OUTLIER_ITERATIONS, OUTLIER_SCALE_FLOOR, TUKEY_C
-from .jet import _JET_U, _JET_V, _add_monomials
+from .jet import _add_monomials
 
-__all__ = ["point_residuals", "outlier_weight", "MAD_SIGMA"]
+__all__ = ["point_residuals", "outlier_weight", "model_terms", "MAD_SIGMA"]
 
 # Standard deviations per median absolute deviation of Gaussian data.
 MAD_SIGMA = 1.4826
 
 
 @njit(cache=True)
-def _pca_frame(q, k, frame, cov, ev):
-    """Rows of ``frame`` (3, 3): tangent axes and normal of the least-squares plane of the
-    ``k`` offsets ``q[:k]`` (units of the radius) and the origin (the point itself)."""
-    c = k + 1.0
+def _pca_frame(q, wr, k, frame, cov, ev):
+    """Rows of ``frame`` (3, 3): tangent axes and normal of the weighted least-squares plane
+    of the ``k`` offsets ``q[:k]`` (units of the radius), weights ``wr[:k]``. The point judged
+    is left out: a spike far off the surface would tilt the plane towards itself."""
     m0 = m1 = m2 = 0.0
+    sw = 0.0
     for i in range(k):
-        m0 += q[i, 0]
-        m1 += q[i, 1]
-        m2 += q[i, 2]
-    m0 /= c
-    m1 /= c
-    m2 /= c
+        m0 += wr[i] * q[i, 0]
+        m1 += wr[i] * q[i, 1]
+        m2 += wr[i] * q[i, 2]
+        sw += wr[i]
+    m0 /= sw
+    m1 /= sw
+    m2 /= sw
     for a in range(3):
         for b in range(3):
             cov[a, b] = 0.0
@@ -43,18 +45,13 @@ def _pca_frame(q, k, frame, cov, ev):
         d0 = q[i, 0] - m0
         d1 = q[i, 1] - m1
         d2 = q[i, 2] - m2
-        cov[0, 0] += d0 * d0
-        cov[0, 1] += d0 * d1
-        cov[0, 2] += d0 * d2
-        cov[1, 1] += d1 * d1
-        cov[1, 2] += d1 * d2
-        cov[2, 2] += d2 * d2
-    cov[0, 0] += m0 * m0       # the origin's own deviation from the centroid
-    cov[0, 1] += m0 * m1
-    cov[0, 2] += m0 * m2
-    cov[1, 1] += m1 * m1
-    cov[1, 2] += m1 * m2
-    cov[2, 2] += m2 * m2
+        w = wr[i]
+        cov[0, 0] += w * d0 * d0
+        cov[0, 1] += w * d0 * d1
+        cov[0, 2] += w * d0 * d2
+        cov[1, 1] += w * d1 * d1
+        cov[1, 2] += w * d1 * d2
+        cov[2, 2] += w * d2 * d2
     cov[1, 0] = cov[0, 1]
     cov[2, 0] = cov[0, 2]
     cov[2, 1] = cov[1, 2]
@@ -72,34 +69,92 @@ def _pca_frame(q, k, frame, cov, ev):
     frame[2, 0], frame[2, 1], frame[2, 2] = n0, n1, n2
 
 
+# Exponents (of u, of v) of the height model's terms: plane (first 3), quadric (first 6),
+# cubic (all 10); the constant term is the third.
+_TERM_U = np.array([1, 0, 0, 2, 1, 0, 3, 2, 1, 0])
+
+
+_TERM_V = np.array([0, 1, 0, 0, 1, 2, 0, 1, 2, 3])
+
+
+def model_terms(k):
+    """Coefficients of the height model fitted to k neighbors: the cubic (10) from 3 points
+    per coefficient on, else the quadric (6), else the plane (3), none below 2 points per
+    plane coefficient (0). A fit with fewer points per coefficient is too poorly determined at
+    x to tell a stray point from noise: a spike far off the surface holds only a thin cap of
+    it in its ball."""
+    for p in (10, 6):
+        if k >= 3 * p:
+            return p
+    return 3 if k >= 6 else 0
+
+
+_model_terms = njit(cache=True)(model_terms)
+
+
 @njit(cache=True)
-def _cubic(sol, u, v):
-    """The cubic height model with coefficients ``sol`` (order of ``_JET_U``) at (u, v)."""
-    return (sol[0] * u * u + sol[1] * u * v + sol[2] * v * v + sol[3] * u + sol[4] * v + sol[5]
-            + sol[6] * u * u * u + sol[7] * u * u * v + sol[8] * u * v * v + sol[9] * v * v * v)
+def _height(sol, p, u, v):
+    """The height model's first ``p`` terms with coefficients ``sol`` at (u, v)."""
+    h = 0.0
+    for a in range(p):
+        h += sol[a] * u ** _TERM_U[a] * v ** _TERM_V[a]
+    return h
+
+
+@njit(cache=True)
+def _moments(uvh, wd, wr, k, mom, hmom, squared):
+    """Power moments of the weights ``w = wd wr`` (or ``w^2`` when ``squared``) over the k
+    points ``uvh[:k]``: ``mom[a, b] = sum w u^a v^b`` (a + b <= 6), ``hmom`` the same of
+    ``w h`` (a + b <= 3)."""
+    for a in range(7):
+        for b in range(7):
+            mom[a, b] = 0.0
+            hmom[a, b] = 0.0
+    for i in range(k):
+        w = wd[i] * wr[i]
+        if squared:
+            w *= w
+        if w > 0.0:
+            _add_monomials(mom, w, uvh[i, 0], uvh[i, 1], 6)
+            _add_monomials(hmom, w * uvh[i, 2], uvh[i, 0], uvh[i, 1], 3)
+
+
+@njit(cache=True)
+def _normal_equations(mom, hmom, p, mat, rhs):
+    """Lower triangle of the normal equations ``mat[:p, :p]`` and ``rhs[:p]`` of the height
+    model's first ``p`` terms."""
+    for a in range(p):
+        rhs[a] = hmom[_TERM_U[a], _TERM_V[a]]
+        for cc in range(a + 1):
+            mat[a, cc] = mom[_TERM_U[a] + _TERM_U[cc], _TERM_V[a] + _TERM_V[cc]]
 
 
 @njit(parallel=True, cache=True)
 def point_residuals(points, query_points, indptr, indices, radius, residual, scale,
                     iterations=OUTLIER_ITERATIONS):
-    """Residual of each query point from a robust cubic fit of its neighbors, and their scale.
+    """Residual of each query point from a robust height fit of its neighbors, and its scale.
 
-    In the frame of the neighbors' PCA plane, the heights of the neighbors within ``radius``
-    (x itself left out) are fitted by a cubic in (u, v) (10 coefficients, weights
-    ``1 - r^2 / radius^2``), first by least squares, then ``iterations`` times reweighted by
-    Tukey's biweight ``(1 - (e / (TUKEY_C s))^2)^2`` of each neighbor's residual e, with s
-    ``MAD_SIGMA`` times the median |e| of the last fit, at least ``OUTLIER_SCALE_FLOOR *
-    radius``. The residual of x is its height above the final fit at x.
+    In the frame of the neighbors' PCA plane (refitted with the robust weights of each round),
+    the heights of the k neighbors within ``radius``
+    (x itself left out) are fitted by a polynomial in (u, v) (a cubic, or a quadric or plane
+    where k is small, :func:`model_terms`: p coefficients; weights ``1 - r^2 / radius^2``),
+    first by least squares, then ``iterations`` times reweighted by Tukey's biweight
+    ``(1 - (e / (TUKEY_C s))^2)^2`` of each neighbor's residual e, with s ``MAD_SIGMA`` times
+    the median |e| of the last fit times ``sqrt(k / (k - p))`` (the fitted coefficients), at
+    least ``OUTLIER_SCALE_FLOOR * radius``. The residual of x is its height above the final
+    fit at x; its scale is s times ``sqrt(1 + c)``, c the variance of the fitted height at x
+    per unit noise (``e^T A^-1 B A^-1 e``, A and B the normal matrices of the weights and of
+    their squares): x's own noise plus the fit's.
 
     Parameters
     ----------
     points : (n, 3) float64; query_points : (m, 3) float64
     indptr, indices : CSR neighbor lists into ``points``; radius : float, model units
     residual : (m,) float64 output, |height of x - fitted height at x|, model units
-    scale : (m,) float64 output, the robust scale s of the final fit, model units
+    scale : (m,) float64 output, the robust scale of that residual, model units
     iterations : int, reweighting rounds
 
-    Both are NaN where the fit is singular (fewer than 11 well-spread neighbors) or x is not
+    Both are NaN where the fit is singular (fewer than 6 well-spread neighbors) or x is not
     finite.
     """
     m = query_points.shape[0]
@@ -143,35 +198,28 @@ def point_residuals(points, query_points, indptr, indices, radius, residual, sca
                 wd[k] = 1.0 - r2
                 wr[k] = 1.0
                 k += 1
-            if k <= 10:
+            p = _model_terms(k)
+            if p == 0:
                 continue
-            _pca_frame(q3, k, frame, cov, ev)
-            for i in range(k):
-                for a in range(3):
-                    uvh[i, a] = (q3[i, 0] * frame[a, 0] + q3[i, 1] * frame[a, 1]
-                                 + q3[i, 2] * frame[a, 2])
             ok = True
             s = 0.0
+            dof = math.sqrt(k / (k - p))
             for it in range(iterations + 1):
-                for a in range(7):
-                    for b in range(7):
-                        mom[a, b] = 0.0
-                        hmom[a, b] = 0.0
+                # the frame's plane is refitted with the robust weights too: stray points
+                # tilt it most where the ball holds few points
+                _pca_frame(q3, wr, k, frame, cov, ev)
                 for i in range(k):
-                    w = wd[i] * wr[i]
-                    if w > 0.0:
-                        _add_monomials(mom, w, uvh[i, 0], uvh[i, 1], 6)
-                        _add_monomials(hmom, w * uvh[i, 2], uvh[i, 0], uvh[i, 1], 3)
-                for a in range(10):
-                    rhs[a] = hmom[_JET_U[a], _JET_V[a]]
-                    for cc in range(a + 1):
-                        mat[a, cc] = mom[_JET_U[a] + _JET_U[cc], _JET_V[a] + _JET_V[cc]]
-                if not solve_sym(mat, rhs, 10, sol):
+                    for a in range(3):
+                        uvh[i, a] = (q3[i, 0] * frame[a, 0] + q3[i, 1] * frame[a, 1]
+                                     + q3[i, 2] * frame[a, 2])
+                _moments(uvh, wd, wr, k, mom, hmom, False)
+                _normal_equations(mom, hmom, p, mat, rhs)
+                if not solve_sym(mat, rhs, p, sol):
                     ok = False
                     break
                 for i in range(k):
-                    res[i] = abs(uvh[i, 2] - _cubic(sol, uvh[i, 0], uvh[i, 1]))
-                s = max(MAD_SIGMA * np.median(res[:k]), OUTLIER_SCALE_FLOOR)
+                    res[i] = abs(uvh[i, 2] - _height(sol, p, uvh[i, 0], uvh[i, 1]))
+                s = max(MAD_SIGMA * np.median(res[:k]) * dof, OUTLIER_SCALE_FLOOR)
                 if it == iterations:
                     break
                 for i in range(k):
@@ -179,8 +227,22 @@ def point_residuals(points, query_points, indptr, indices, radius, residual, sca
                     wr[i] = (1.0 - z * z) ** 2 if z < 1.0 else 0.0
             if not ok:
                 continue
-            residual[q] = abs(sol[5]) * radius
-            scale[q] = s * radius
+            # x's own noise adds to the fit's error at x: variance s^2 (1 + e^T A^-1 B A^-1 e)
+            # with A, B the moments of the weights and of their squares, e the constant term
+            fitted = sol[2]
+            _normal_equations(mom, hmom, p, mat, rhs)
+            for a in range(p):
+                rhs[a] = 1.0 if a == 2 else 0.0
+            if not solve_sym(mat, rhs, p, sol):
+                continue
+            _moments(uvh, wd, wr, k, mom, hmom, True)
+            _normal_equations(mom, hmom, p, mat, rhs)
+            spread = 0.0
+            for a in range(p):
+                for cc in range(p):
+                    spread += sol[a] * sol[cc] * (mat[a, cc] if cc <= a else mat[cc, a])
+            residual[q] = abs(fitted) * radius
+            scale[q] = s * math.sqrt(1.0 + spread) * radius
 
 
 def outlier_weight(score):

@@ -161,14 +161,15 @@ def kring_search(v, f, radius):
 
 def outlier_scores(v, radius, search, rows, progress, block=BLOCK):
     """Outlier scores (n,) of the points ``v[rows]`` (NaN elsewhere): each one's residual from
-    a robust cubic fit of its neighborhood over the fit's robust scale
-    (:func:`meshcurv.fit.outliers.point_residuals`)."""
+    a robust height fit of its neighborhood over its robust scale, as a Gaussian deviate
+    (:func:`meshcurv.fit.outliers.point_residuals`, :func:`~meshcurv.fit.outliers.outlier_score`)."""
     score = np.full(len(v), np.nan)
     for pos in blocks(rows, progress, "outliers", block):
         indptr, indices = search.neighbors(pos)
-        residual, scale = np.empty(len(pos)), np.empty(len(pos))
-        outliers.point_residuals(search.points, v[pos], indptr, indices, radius, residual, scale)
-        score[pos] = residual / scale
+        residual, scale, dof = (np.empty(len(pos)) for _ in range(3))
+        outliers.point_residuals(search.points, v[pos], indptr, indices, radius, residual, scale,
+                                 dof)
+        score[pos] = outliers.outlier_score(residual, scale, dof)
     return score
 
 
@@ -263,9 +264,11 @@ class _Outputs:
 
     def flag_outliers(self):
         """No curvature, status OUTLIER, where the outlier score reaches the Tukey cutoff (the
-        points of weight 0 in their neighbors' fits)."""
+        points of weight 0 in their neighbors' fits) - unless the point's own position or
+        normal already gave a reason."""
         with np.errstate(invalid="ignore"):
-            out = self.outlier_score >= TUKEY_C
+            out = (self.outlier_score >= TUKEY_C) & (self.status != Status.NO_POSITION) & \
+                (self.status != Status.NO_NORMAL)
         for a in (self.k1, self.k2, self.d1, self.d2, self.residual):
             a[out] = np.nan
         self.status[out] = Status.OUTLIER

@@ -55,15 +55,36 @@ def test_point_residuals_match_the_numpy_specification():
     orders = set()
     for radius in (0.12, 0.2, 0.3, 0.45):
         indptr, indices = ball_csr(v, radius)
-        residual, scale = np.empty(len(v)), np.empty(len(v))
-        outliers.point_residuals(v, v, indptr, indices, radius, residual, scale)
+        residual, scale, dof = (np.empty(len(v)) for _ in range(3))
+        outliers.point_residuals(v, v, indptr, indices, radius, residual, scale, dof)
         for i in range(0, len(v), 17):
             nbr = v[indices[indptr[i]:indptr[i + 1]]]
             ref = outliers_spec.point_residual(v[i], nbr, radius)
             assert residual[i] == pytest.approx(ref[0], rel=1e-8, abs=1e-12, nan_ok=True)
             assert scale[i] == pytest.approx(ref[1], rel=1e-8, nan_ok=True)
+            assert dof[i] == ref[2]
             orders.add(outliers.model_terms(len(nbr) - 1))
     assert orders >= {0, 3, 6, 10}
+
+
+def test_scores_of_gaussian_noise_stay_below_the_cutoff_in_small_and_large_balls():
+    """A noisy plane sampled at random, balls of 6 to 60 points: at most one point in a
+    thousand flagged (measured <= 3.5e-4 in 9-30 point balls, none beyond). The raw ratio of
+    residual to MAD scale would flag 3 % of the points of 6-8 point balls, 0.1 % at 30-60."""
+    rng = np.random.default_rng(6)
+    for per_ball in (8, 15, 60):
+        n = 6000
+        side = np.sqrt(n * np.pi / per_ball)
+        p = np.column_stack([rng.uniform(0, side, (n, 2)), rng.normal(scale=0.01, size=n)])
+        indptr, indices = ball_csr(p, 1.0)
+        residual, scale, dof = (np.empty(n) for _ in range(3))
+        outliers.point_residuals(p, p, indptr, indices, 1.0, residual, scale, dof)
+        score = outliers.outlier_score(residual, scale, dof)
+        assert np.isfinite(score).mean() > 0.75      # balls of fewer than 6 points: no score
+        assert np.mean(score >= TUKEY_C) <= 1e-3
+        # the t-calibrated score is below the raw ratio, and equal to it for many residuals
+        assert np.all(score[np.isfinite(score)] <= (residual / scale)[np.isfinite(score)] + 1e-9)
+    assert outliers.outlier_score([1.0], [1.0], [1e9])[0] == pytest.approx(1.0, rel=1e-6)
 
 
 def test_outlier_weight_is_one_within_the_noise_then_redescends_to_zero():
@@ -143,9 +164,9 @@ def test_spikes_do_not_move_their_neighbors_curvature(name, mesh):
     Sphere (~60 neighbors, spikes 0.1-0.5 radius off): the issue's targets, <= 2 % of the good
     vertices off by more than 10 % and mean |dk| <= 0.5 x MeshLab APSS's 0.058; without the
     outlier pass 45 % are off. Torus (~44 neighbors, spikes up to 0.95 radius off, where a
-    spike's ball holds a thin cap of ~10 points and some go unjudged): at most 2 points more
-    in a hundred off than without spikes and 1.3x the mean error (measured 1.3 points, 1.18x);
-    without the outlier pass 27 % are off and the error triples.
+    spike's ball holds a thin cap of ~10 points and 10 % of them go unflagged): at most 2
+    points more in a hundred off than without spikes and 1.3x the mean error (measured 1.7
+    points, 1.22x); without the outlier pass 27 % are off and the error triples.
     """
     if name == "sphere":
         s, radius = surfaces.sphere(subdivisions=4), 0.3
@@ -167,12 +188,12 @@ def test_spikes_do_not_move_their_neighbors_curvature(name, mesh):
     else:
         assert off <= off_noisy + 0.02
         assert mean <= 1.3 * mean_noisy
-        assert np.mean(res.status[spikes] == Status.OUTLIER) >= 0.9
+        assert np.mean(res.status[spikes] == Status.OUTLIER) >= 0.85
     flagged = res.status == Status.OUTLIER
     assert not res.valid[flagged].any() and np.all(np.isnan(res.k1[flagged]))
     assert np.mean(flagged[good]) <= 1e-3
     # the spikes' scores are far beyond the cutoff, the good vertices' within the noise
-    assert np.nanmedian(res.outlier_score[spikes]) > 3 * TUKEY_C
+    assert np.nanmedian(res.outlier_score[spikes]) > 1.5 * TUKEY_C
     assert np.nanpercentile(res.outlier_score[good], 99) < 0.75 * TUKEY_C
 
 

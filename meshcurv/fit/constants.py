@@ -38,6 +38,12 @@ STATUS_OUTLIER = 8
 # efficiency under Gaussian noise): Gaussian noise alone exceeds it at 3 points in a million.
 TUKEY_C = 4.685
 
+# Outlier scores up to which a point keeps its full weight in the later fits: two robust
+# sigmas, what Gaussian noise gives 95 % of the points. The weight then descends as Tukey's
+# biweight of the excess to 0 at TUKEY_C, so clean and ordinarily noisy points are weighted
+# exactly as without the outlier pass.
+OUTLIER_TRUSTED = 2.0
+
 # Reweighting rounds of that robust fit after its least-squares start (measured: the spike
 # residuals and the scale settle after 2-3; the default weights change by < 1e-3 beyond 3).
 OUTLIER_ITERATIONS = 3

@@ -55,7 +55,7 @@ def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, wo
     acc, kappa, rows, active, scratch, mat, rhs, sol, b3, ev, mix = work
     inv_r = 1.0 / radius
     r2max = radius * radius
-    tangent_frame(points, nbr, lo, hi, x, n, r2max, tu, tv, rank)
+    tangent_frame(points, nbr, lo, hi, x, n, r2max, tu, tv, rank, point_weights)
     n_nbr = accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta,
                                  (ca, sa), slab, acc, point_weights)
     m, planes_seen = half_set_samples(acc, ndir, min_points, min_spread, unit_norm, corrected,

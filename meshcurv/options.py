@@ -135,13 +135,13 @@ class Options:
         point orients every normal towards it (a scanner position).
     robust_points : bool, default True
         Down-weight stray points (scanner spikes) in every fit: each point gets an outlier
-        score, its distance from a robust (Tukey-reweighted) cubic fit of its neighborhood over
-        the neighborhood's robust noise scale (:mod:`meshcurv.fit.outliers`), and the weight
-        ``(1 - (score / 4.685)^2)^2`` (0 beyond) multiplies its weight in the normals, the
-        local jet and the circle fits. Points scoring above 4.685 are flagged
-        (``Status.OUTLIER``, no curvature). With 2 % of a noisy sphere's vertices pushed 1-4 %
-        of the diagonal off it, the vertices off by more than 10 % drop from 45 % to under 1 %;
-        clean surfaces are not flagged anywhere. Costs one more pass over the points.
+        score, its distance from a robust (Tukey-reweighted) height fit of its neighborhood
+        in robust noise scales, as a Gaussian deviate (:mod:`meshcurv.fit.outliers`); its
+        weight in the normals, the local jet and the circle fits is 1 up to a score of 2, then
+        descends to 0 at 4.685, where the point is flagged (``Status.OUTLIER``, no curvature).
+        With 2 % of a noisy sphere's vertices pushed 1-4 % of the diagonal off it, the good
+        vertices off by more than 10 % drop from 45 % to none; on clean surfaces every weight
+        is 1 (results unchanged). Costs one more pass over the points.
 
     Examples
     --------

@@ -104,25 +104,24 @@ _model_terms = njit(cache=True)(model_terms)
 @njit(cache=True)
 def _height(sol, p, u, v):
     """The height model's first ``p`` terms with coefficients ``sol`` at (u, v)."""
-    h = 0.0
-    for a in range(p):
-        h += sol[a] * u ** _TERM_U[a] * v ** _TERM_V[a]
+    h = sol[0] * u + sol[1] * v + sol[2]
+    if p > 3:
+        h += sol[3] * u * u + sol[4] * u * v + sol[5] * v * v
+    if p > 6:
+        h += u * (u * (sol[6] * u + sol[7] * v) + sol[8] * v * v) + sol[9] * v * v * v
     return h
 
 
 @njit(cache=True)
-def _moments(uvh, wd, wr, k, mom, hmom, squared):
-    """Power moments of the weights ``w = wd wr`` (or ``w^2`` when ``squared``) over the k
-    points ``uvh[:k]``: ``mom[a, b] = sum w u^a v^b`` (a + b <= 6), ``hmom`` the same of
-    ``w h`` (a + b <= 3)."""
+def _moments(uvh, wd, wr, k, mom, hmom):
+    """Power moments of the weights ``w = wd wr`` over the k points ``uvh[:k]``:
+    ``mom[a, b] = sum w u^a v^b`` (a + b <= 6), ``hmom`` the same of ``w h`` (a + b <= 3)."""
     for a in range(7):
         for b in range(7):
             mom[a, b] = 0.0
             hmom[a, b] = 0.0
     for i in range(k):
         w = wd[i] * wr[i]
-        if squared:
-            w *= w
         if w > 0.0:
             _add_monomials(mom, w, uvh[i, 0], uvh[i, 1], 6)
             _add_monomials(hmom, w * uvh[i, 2], uvh[i, 0], uvh[i, 1], 3)
@@ -244,7 +243,7 @@ def point_residuals(points, query_points, indptr, indices, radius, residual, sca
                     for a in range(3):
                         uvh[i, a] = (q3[i, 0] * frame[a, 0] + q3[i, 1] * frame[a, 1]
                                      + q3[i, 2] * frame[a, 2])
-                _moments(uvh, wd, wr, k, mom, hmom, False)
+                _moments(uvh, wd, wr, k, mom, hmom)
                 _normal_equations(mom, hmom, p, mat, rhs)
                 if not solve_sym(mat, rhs, p, sol):
                     ok = False
@@ -270,12 +269,11 @@ def point_residuals(points, query_points, indptr, indices, radius, residual, sca
                 rhs[a] = 1.0 if a == 2 else 0.0
             if not solve_sym(mat, rhs, p, sol):
                 continue
-            _moments(uvh, wd, wr, k, mom, hmom, True)
-            _normal_equations(mom, hmom, p, mat, rhs)
+            # e^T A^-1 B A^-1 e = sum_i (w_i x_i . A^-1 e)^2, x_i the model's terms at point i
             spread = 0.0
-            for a in range(p):
-                for cc in range(p):
-                    spread += sol[a] * sol[cc] * (mat[a, cc] if cc <= a else mat[cc, a])
+            for i in range(k):
+                g = wd[i] * wr[i] * _height(sol, p, uvh[i, 0], uvh[i, 1])
+                spread += g * g
             residual[q] = abs(fitted) * radius
             scale[q] = s * math.sqrt(1.0 + spread) * radius
             dof[q] = k - p

@@ -68,12 +68,12 @@ def save_curvature_mesh(ms, path):
     fields["valid"] = (scalar("valid") > 0).astype(np.uint8)
     if has_attribute(scalar, "status"):  # meshes filtered by earlier versions have none
         fields["status"] = scalar("status").astype(np.uint8)
-    if has_attribute(scalar, "outlier_score"):
-        fields["outlier_score"] = scalar("outlier_score")
     for name in ("d1", "d2"):
         values = point(name)
         for i, c in enumerate("xyz"):
             fields[name + c] = values[:, i]
+    if has_attribute(scalar, "outlier_score"):
+        fields["outlier_score"] = scalar("outlier_score")
     for f, dtype in _DIAGNOSTICS.items():
         if has_attribute(scalar, f):
             fields[f] = scalar(f).astype(dtype)

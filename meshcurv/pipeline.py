@@ -12,18 +12,19 @@ import numpy as np
 from scipy.spatial import cKDTree
 from tqdm.auto import tqdm
 
-from .fit import fused, jet
+from .fit import fused, jet, outliers
+from .fit.constants import TUKEY_C
 from .fit.extrapolate import BIAS_RATIO, extrapolate_to_zero
 from .neighbors import (BallGrid, KringWork, ball_counts, ball_grid, ball_neighbors,
                         edge_adjacency, kring_counts, kring_neighbors, spatial_order)
 from .normals import face_vertex_normals, orient, orient_along, orient_like, orient_mst, \
     orient_towards, pca_normals, sphere_normals
-from .result import CurvatureResult
+from .result import CurvatureResult, Status
 
 __all__ = ["run", "run_radii", "estimate_normals", "weight_blend", "clean_fraction",
            "given_normal_noise", "mix_given_normals", "Search", "ball_search", "kring_search",
-           "block_size", "blocks", "mst_normals", "BLOCK", "BLOCK_ENTRIES", "MAX_PAIRS",
-           "NOISE_SCALE", "BIAS_NOISE_SCALE", "GIVEN_SAMPLE"]
+           "block_size", "blocks", "mst_normals", "outlier_scores", "BLOCK", "BLOCK_ENTRIES",
+           "MAX_PAIRS", "NOISE_SCALE", "BIAS_NOISE_SCALE", "GIVEN_SAMPLE"]
 
 # Query points per call into the kernels: bounds the memory of the neighbor lists (about
 # 0.8 kB per query point at 100 neighbors) at no measurable cost in speed.
@@ -293,10 +294,41 @@ def kring_search(v, f, radius):
     return Search(neighbors, counts, v, None)
 
 
-def mst_normals(v, radius, search, progress, block=BLOCK):
+def outlier_scores(v, radius, search, rows, progress, block=BLOCK):
+    """Outlier scores (n,) of the points ``v[rows]`` (NaN elsewhere): each one's residual from
+    a robust height fit of its neighborhood over its robust scale, as a Gaussian deviate
+    (:func:`meshcurv.fit.outliers.point_residuals`, :func:`~meshcurv.fit.outliers.outlier_score`)."""
+    score = np.full(len(v), np.nan)
+    for pos in blocks(rows, progress, "outliers", block):
+        indptr, indices = search.neighbors(pos)
+        residual, scale, dof = (np.empty(len(pos)) for _ in range(3))
+        outliers.point_residuals(search.points, v[pos], indptr, indices, radius, residual, scale,
+                                 dof)
+        score[pos] = outliers.outlier_score(residual, scale, dof)
+    return score
+
+
+def _scored_rows(v, search, query, finite, block, plan):
+    """The vertices whose outlier scores the estimates at ``query`` use: every finite one, or,
+    for a few queries without normal-aware fits, those and their neighbors (the neighbors'
+    normals of normal-aware fits come from their own neighborhoods, scored too)."""
+    if finite is None:
+        finite = np.flatnonzero(np.isfinite(v).all(axis=1))
+    if len(query) >= len(finite) // 4 or plan.normal_constraints:
+        return finite
+    parts = [query]
+    for s in range(0, len(query), block):
+        rows = np.unique(search.neighbors(query[s:s + block])[1])
+        parts.append(rows if search.rank is None else search.rank[rows])
+    rows = np.unique(np.concatenate(parts))
+    return rows[np.isfinite(v[rows]).all(axis=1)]
+
+
+def mst_normals(v, radius, search, progress, block=BLOCK, point_weights=None):
     """PCA normals of every point, oriented along a spanning tree whose graph joins each point
-    to its nearest neighbors, taken from the search's lists (see :func:`ball_search`).
-    Returns ``(normals (n, 3), note)``: the note says how the pieces were oriented
+    to its nearest neighbors, taken from the search's lists (see :func:`ball_search`);
+    ``point_weights`` (per row of ``search.points``) weight the plane fits. Returns
+    ``(normals (n, 3), note)``: the note says how the pieces were oriented
     (:func:`meshcurv.normals.orient.orientation_note`)."""
     n = len(v)
     nv = np.full((n, 3), np.nan)
@@ -306,7 +338,7 @@ def mst_normals(v, radius, search, progress, block=BLOCK):
     order = rank if rank is not None else spatial_order(v, radius)
     for pos in blocks(order, progress, "normals", block):
         indptr, indices = search.neighbors(pos)
-        nv[pos] = pca_normals(search.points, v[pos], indptr, indices, radius)
+        nv[pos] = pca_normals(search.points, v[pos], indptr, indices, radius, point_weights)
         near = orient.nearest_in_lists(search.points, v[pos], indptr, indices, _TREE_NEIGHBORS)
         graph[pos] = near if rank is None else np.where(near >= 0, rank[near], -1)
     return orient_mst(v, nv, neighbors=graph, note=True)
@@ -320,13 +352,14 @@ def estimate_normals(v, radius, progress=False):
                                   progress)[0]
 
 
-def _spanning_tree_normals(v, radius, search, finite, progress):
+def _spanning_tree_normals(v, radius, search, finite, progress, point_weights=None):
     """:func:`mst_normals` of the ``finite`` (k,) rows of ``v`` over the ball ``search``, in
     blocks sized for their neighbor lists."""
-    return mst_normals(v, radius, search, progress, block_size(search, finite, radius, "points"))
+    return mst_normals(v, radius, search, progress, block_size(search, finite, radius, "points"),
+                       point_weights)
 
 
-def _start_normals(v, f, given, radius, search, finite, plan, progress):
+def _start_normals(v, f, given, radius, search, finite, plan, progress, point_weights=None):
     """``(normals, face_normals, note)`` before the blocks: the given ones, the faces', or the
     spanning tree's (which needs every normal first); None where blocks estimate their own.
     ``finite``: the finite rows of ``v`` (ball searches only); ``note``: how the normals get
@@ -338,41 +371,39 @@ def _start_normals(v, f, given, radius, search, finite, plan, progress):
         with np.errstate(invalid="ignore"):       # NaN vertices give NaN normals
             face_normals = face_vertex_normals(v, f)
     if plan.normals == "mst":
-        normals, note = _spanning_tree_normals(v, radius, search, finite, progress)
+        normals, note = _spanning_tree_normals(v, radius, search, finite, progress,
+                                               point_weights)
         return normals, None, note
     note = ("oriented like the faces" if face_normals is not None else
             "oriented towards +z" if plan.viewpoint is None else "oriented towards the viewpoint")
     return (face_normals if plan.normals == "faces" else None), face_normals, note
 
 
-def _pca_field(v, face_normals, search, finite, radius, plan, progress):
-    """The block normals of every vertex before the blocks (plane fits oriented like the face
-    normals or towards the viewpoint), for the normal-aware circle fits: (n, 3), NaN where the
-    neighborhood is too small. Measured, on noisy meshes these normals serve the circle fits
-    far better than the face normals (torus 240 x 60, 0.3 % noise: mean |dk| 0.036 with them,
-    0.135 with face normals, 0.206 with none) and cost what the blocks would spend on them."""
+def _pca_field(v, face_normals, search, finite, radius, plan, progress, point_weights=None):
+    """The block normals of every vertex before the blocks (:func:`_block_normals`' plane
+    fits), for the normal-aware circle fits: (n, 3), NaN where the neighborhood is too small.
+    Measured, on noisy meshes these normals serve the circle fits far better than the face
+    normals (torus 240 x 60, 0.3 % noise: mean |dk| 0.036 with them, 0.135 with face normals,
+    0.206 with none) and cost what the blocks would spend on them."""
     rows = np.arange(len(v)) if finite is None else finite
     if search.rank is not None:
         rows = search.rank          # the grid's cell order: neighborhoods stay in cache
     nv = np.full((len(v), 3), np.nan)
     for pos in blocks(rows, progress, "normals", block_size(search, rows, radius, "points")):
         indptr, indices = search.neighbors(pos)
-        nb = pca_normals(search.points, v[pos], indptr, indices, radius)
-        if face_normals is not None:
-            orient_like(nb, face_normals[pos])
-        else:
-            orient_towards(nb, v[pos], plan.viewpoint)
-        nv[pos] = nb
+        nv[pos] = _block_normals(None, face_normals, pos, v[pos], indptr, indices, radius,
+                                 search, plan, point_weights)
     return nv
 
 
-def _block_normals(nv, face_normals, idx, xb, indptr, indices, radius, search, plan):
+def _block_normals(nv, face_normals, idx, xb, indptr, indices, radius, search, plan,
+                   point_weights=None):
     """Unit normals of one block: taken from ``nv``, or PCA plane fits oriented like the face
     normals, towards the viewpoint or towards +z."""
     if nv is not None:
         qb = nv[idx]
     else:
-        qb = pca_normals(search.points, xb, indptr, indices, radius)
+        qb = pca_normals(search.points, xb, indptr, indices, radius, point_weights)
         if face_normals is not None:
             orient_like(qb, face_normals[idx])
         elif plan.viewpoint is not None:
@@ -392,13 +423,25 @@ class _Outputs:
         self.n_samples = np.zeros(m, dtype=np.int32)
         self.n_neighbors = np.zeros(m, dtype=np.int32)
         self.status = np.zeros(m, dtype=np.int8)
+        self.outlier_score = np.full(m, np.nan)
+
+    def flag_outliers(self):
+        """No curvature, status OUTLIER, where the outlier score reaches the Tukey cutoff (the
+        points of weight 0 in their neighbors' fits) - unless the point's own position or
+        normal already gave a reason."""
+        with np.errstate(invalid="ignore"):
+            out = (self.outlier_score >= TUKEY_C) & (self.status != Status.NO_POSITION) & \
+                (self.status != Status.NO_NORMAL)
+        for a in (self.k1, self.k2, self.d1, self.d2, self.residual):
+            a[out] = np.nan
+        self.status[out] = Status.OUTLIER
 
     def result(self, radius):
         return CurvatureResult(k1=self.k1, k2=self.k2, d1=self.d1, d2=self.d2,
                                normals=self.normals, valid=np.isfinite(self.k1),
                                n_neighbors=self.n_neighbors, n_samples=self.n_samples,
                                residual=self.residual, noise=self.noise, radius=radius,
-                               status=self.status)
+                               status=self.status, outlier_score=self.outlier_score)
 
 
 def _normal_field(nv, search, plan):
@@ -414,10 +457,11 @@ def _normal_field(nv, search, plan):
 
 
 def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2=0.0,
-               field_of_points=None):
+               field_of_points=None, point_weights=None):
     """Local jet (noise, refined normal) and the fused fits of one block, into ``out[pos]``;
     ``given_a2``: the noise variance of given normals (:func:`given_normal_noise`); with the
-    normals of ``search.points`` (see :func:`_normal_field`), normal-aware fits.
+    normals of ``search.points`` (see :func:`_normal_field`), normal-aware fits;
+    ``point_weights`` (per row of ``search.points``) weight the neighbors in all of them.
 
     Normals estimated from the points themselves carry nothing the positions do not where
     those are clean, only the bias of their own neighborhoods (Table 2 paraboloid, radius 2:
@@ -429,7 +473,7 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2
     noise = np.empty(b)
     start = qb.copy() if plan.refine else None
     jet.local_jet(search.points, xb, qb, indptr, indices, radius,
-                  plan.refine and plan.normal_fit != "sphere", noise)
+                  plan.refine and plan.normal_fit != "sphere", noise, point_weights)
     beta = weight_blend(noise, radius, "auto")
     by_sphere = plan.refine and plan.normal_fit != "quadric"
     if by_sphere or given_a2 > 0:
@@ -452,10 +496,10 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2
         np.ones(b) if plan.normals == "given" and not plan.refine else 1.0 - beta)
     fused.curvature_cga(search.points, xb, qb, indptr, indices, radius, blend, plan.fit,
                         (k1, k2, d1, d2, samples, residual, nbrs, status), search.rank,
-                        *constraints)
+                        *constraints, point_weights)
     if plan.bias_correction:
         k1, k2, d1, d2 = _bias_corrected(search, xb, qb, indptr, indices, radius, blend, plan,
-                                         (k1, k2, d1, d2), noise, constraints)
+                                         (k1, k2, d1, d2), noise, constraints + (point_weights,))
     out.k1[pos], out.k2[pos], out.d1[pos], out.d2[pos] = k1, k2, d1, d2
     out.normals[pos], out.n_samples[pos], out.residual[pos] = qb, samples, residual
     out.n_neighbors[pos], out.noise[pos], out.status[pos] = nbrs, noise, status
@@ -464,8 +508,9 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2
 def _bias_corrected(search, xb, qb, indptr, indices, radius, blend, plan, large, noise,
                     constraints):
     """``large`` (k1, k2, d1, d2) at ``radius`` extrapolated to radius 0 with a second fit over
-    the same lists within ``BIAS_RATIO * radius`` (same normals, normal ``constraints`` (the
-    last three arguments of :func:`meshcurv.fit.fused.curvature_cga`) and weight profile; the
+    the same lists within ``BIAS_RATIO * radius`` (same normals, normal ``constraints`` and
+    point weights (the last four arguments of :func:`meshcurv.fit.fused.curvature_cga`) and
+    weight profile; the
     half-frequency Euler model, which absorbs what a tilted normal does to opposite half-sets
     of a smaller, more unevenly filled ball), mixed in by the measured ``noise``
     (:func:`clean_fraction` at :data:`BIAS_NOISE_SCALE`)."""
@@ -514,8 +559,19 @@ def run_radii(v, f, given_normals, radii, query, plan, progress=False):
         shared = ball_search(v, finite, max(radii))
         searches = [shared] * len(radii)
         block = block_size(shared, query, max(radii), what)
-    starts = [_start_normals(v, f, given_normals, r, s, finite, plan, progress)
-              for s, r in zip(searches, radii)]
+    scores, weights = [], []
+    for s, r in zip(searches, radii):
+        score = point_weights = None
+        if plan.robust_points:
+            # scores by vertex; weights by row of s.points (the grid's order where it has one)
+            score = outlier_scores(v, r, s, _scored_rows(v, s, query, finite, block, plan),
+                                   progress, block)
+            weight = outliers.outlier_weight(score)
+            point_weights = weight if s.rank is None else weight[s.rank]
+        scores.append(score)
+        weights.append(point_weights)
+    starts = [_start_normals(v, f, given_normals, r, s, finite, plan, progress, w)
+              for s, r, w in zip(searches, radii, weights)]
     outs = [_Outputs(len(query)) for _ in radii]
     given_a2 = [given_normal_noise(v, start[0], r, s, query) if plan.check_given else 0.0
                 for s, r, start in zip(searches, radii, starts)]
@@ -523,7 +579,7 @@ def run_radii(v, f, given_normals, radii, query, plan, progress=False):
     for i, (s, r) in enumerate(zip(searches, radii)):
         nv, face_normals, note = starts[i]
         if plan.normal_constraints and nv is None:
-            nv = _pca_field(v, face_normals, s, finite, r, plan, progress)
+            nv = _pca_field(v, face_normals, s, finite, r, plan, progress, weights[i])
             starts[i] = (nv, face_normals, note)
         fields.append(_normal_field(nv, s, plan))
     # queries by grid cell for ball queries (the points a block touches then stay in cache);
@@ -533,13 +589,17 @@ def run_radii(v, f, given_normals, radii, query, plan, progress=False):
         idx = query[pos]
         xb = v[idx]
         lists = None if plan.use_kring else shared.neighbors(idx)
-        for out, search, r, (nv, face_normals, _), a2, field in zip(outs, searches, radii,
-                                                                     starts, given_a2, fields):
+        for out, search, r, (nv, face_normals, _), a2, field, w in zip(
+                outs, searches, radii, starts, given_a2, fields, weights):
             indptr, indices = search.neighbors(idx) if plan.use_kring else lists
-            qb = _block_normals(nv, face_normals, idx, xb, indptr, indices, r, search, plan)
-            _fit_block(out, pos, xb, qb, indptr, indices, r, search, plan, a2, field)
+            qb = _block_normals(nv, face_normals, idx, xb, indptr, indices, r, search, plan, w)
+            _fit_block(out, pos, xb, qb, indptr, indices, r, search, plan, a2, field, w)
             del indptr, indices
         del lists
+    for out, score in zip(outs, scores):
+        if score is not None:
+            out.outlier_score[:] = score[query]
+            out.flag_outliers()
     results = [out.result(r) for out, r in zip(outs, radii)]
     for res, (_, _, note) in zip(results, starts):
         res.orientation = note

@@ -12,7 +12,8 @@ from .fit import constants
 __all__ = ["CurvatureResult", "Status", "CURVATURE_FIELDS", "curvature_fields"]
 
 # Per-vertex curvature fields of every annotated file (PLY properties, LAS extra bytes).
-CURVATURE_FIELDS = shape.FIELDS + ("valid", "status", "d1x", "d1y", "d1z", "d2x", "d2y", "d2z")
+CURVATURE_FIELDS = shape.FIELDS + ("valid", "status", "d1x", "d1y", "d1z", "d2x", "d2y", "d2z",
+                                   "outlier_score")
 
 
 class Status(IntEnum):
@@ -32,6 +33,9 @@ class Status(IntEnum):
     - ``DEGENERATE_DIRECTIONS`` (6): the directions the circle fits measured do not span the
       Euler model (neighbors along one curve, e.g. the rim of a triangle fan).
     - ``OUT_OF_RANGE`` (7): the curvatures exceed float64 (clouds of subnormal size).
+    - ``OUTLIER`` (8): the point lies further from the robust fit of its neighborhood than
+      the noise explains (``outlier_score`` above 4.685: a spike or stray point); it was left
+      out of its neighbors' fits and gets no curvature of its own.
     """
 
     OK = constants.STATUS_OK
@@ -42,6 +46,7 @@ class Status(IntEnum):
     ILL_POSED_FIT = constants.STATUS_ILL_POSED_FIT
     DEGENERATE_DIRECTIONS = constants.STATUS_DEGENERATE_DIRECTIONS
     OUT_OF_RANGE = constants.STATUS_OUT_OF_RANGE
+    OUTLIER = constants.STATUS_OUTLIER
 
 
 @dataclass
@@ -67,6 +72,10 @@ class CurvatureResult:
         "oriented like the faces", "oriented towards the viewpoint", "oriented towards +z",
         or the spanning tree's rule per piece, e.g. "oriented outward (closed surface)" (see
         :func:`meshcurv.normals.orient.piece_signs`); None where the producer does not tell
+    outlier_score : (n,) float64, the point's distance from a robust cubic fit of its
+        neighborhood in robust noise scales (:mod:`meshcurv.fit.outliers`; above 4.685:
+        ``Status.OUTLIER``); NaN where not computed (``robust_points=False``, too few
+        neighbors), or None where the producer does not tell
     """
 
     k1: np.ndarray
@@ -82,6 +91,7 @@ class CurvatureResult:
     radius: float
     status: np.ndarray = None
     orientation: str = None
+    outlier_score: np.ndarray = None
 
     @property
     def mean(self):
@@ -110,7 +120,8 @@ class CurvatureResult:
 def curvature_fields(result):
     """The :data:`CURVATURE_FIELDS` of a :class:`~meshcurv.CurvatureResult`, in that order, as
     ``{name: (n,) array}``: float64, ``valid`` uint8 (1 = estimated), ``status`` uint8
-    (:class:`Status`), ``d1x .. d2z`` the components of the principal directions."""
+    (:class:`Status`), ``d1x .. d2z`` the components of the principal directions,
+    ``outlier_score`` float64 (NaN where not computed)."""
     out = {f: np.asarray(getattr(result, f), dtype=np.float64) for f in shape.FIELDS}
     out["valid"] = np.asarray(result.valid, dtype=np.uint8)
     out["status"] = np.asarray(result.status, dtype=np.uint8)
@@ -118,4 +129,7 @@ def curvature_fields(result):
         arr = getattr(result, name)
         for a, c in enumerate("xyz"):
             out[name + c] = arr[:, a]
+    score = result.outlier_score
+    out["outlier_score"] = (np.full(len(result.k1), np.nan) if score is None else
+                            np.asarray(score, dtype=np.float64))
     return out

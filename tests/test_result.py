@@ -50,8 +50,12 @@ def test_too_few_circle_fits_for_the_half_frequency_model_are_ill_posed():
         p = np.vstack([[0, 0, 0], np.column_stack([rng.uniform(-0.7, 0.7, (k, 2)),
                                                    rng.normal(scale=0.05, size=k)])])
         nv = np.tile(UP, (len(p), 1))
+        # positions only, and robust_points=False: the outlier pass re-weights points of these
+        # tiny noisy clouds, and the robust Euler refit may then drop fits (ill-posed with
+        # more than 6 samples)
         res = meshcurv.principal_curvatures(p, normals=nv, radius=1.0, refine_normals=False,
-                                            half_frequency=True, query=[0])
+                                            half_frequency=True, query=[0],
+                                            normal_constraints="off", robust_points=False)
         if res.status[0] == Status.ILL_POSED_FIT:
             assert res.n_samples[0] in (5, 6)
             found += 1

@@ -106,7 +106,7 @@ def circle_fit(acc, k, unit_norm, b, ev, mu=0.0):
 
 @njit(cache=True)
 def accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta, planes, slab,
-                         acc, point_normals=None):
+                         acc, point_normals=None, point_weights=None):
     """Accumulate the neighbors ``points[nbr[lo:hi]]`` of x into the half-sets' sums; their count.
 
     Each neighbor within the ball (``r2max`` the squared radius, ``inv_r`` its inverse; model
@@ -119,6 +119,8 @@ def accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta, 
     ``point_normals`` ((n, 3) unit, aligned with ``points``; NaN rows give no normal row) add
     each neighbor's normal row, centred on the ball's weighted mean position and normal (a
     normal facing away from n is turned round first).
+    ``point_weights`` (n,) in [0, 1], optional (the outlier pass's): multiplies each
+    neighbor's weight; neighbors of weight 0 are counted in the ball but join no half-set.
     """
     ca, sa = planes[0], planes[1]
     ndir = ca.shape[0]
@@ -133,6 +135,9 @@ def accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta, 
         if not inside:
             continue
         n_nbr += 1
+        pw = 1.0 if point_weights is None else point_weights[nbr[j]]
+        if pw <= 0.0:
+            continue
         u = qx * tu[0] + qy * tu[1] + qz * tu[2]
         v = qx * tv[0] + qy * tv[1] + qz * tv[2]
         h = qx * n[0] + qy * n[1] + qz * n[2]
@@ -149,13 +154,13 @@ def accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta, 
                         + point_normals[p, 2] * tv[2])
             has_normal = np.isfinite(bu + bv) and u * u + v * v > 0.0
             if has_normal:
-                w = (1.0 - beta) + beta * (1.0 - r2) ** WEIGHT_POWER
+                w = ((1.0 - beta) + beta * (1.0 - r2) ** WEIGHT_POWER) * pw
                 sw += w
                 su += w * u
                 sv += w * v
                 sbu += w * bu
                 sbv += w * bv
-        add_point(acc, u, v, h, r2, beta, ca, sa, slab, bu, bv, has_normal)
+        add_point(acc, u, v, h, r2, beta, ca, sa, slab, bu, bv, has_normal, pw)
     if sw > 0.0:
         center_normal_rows(acc, ca, sa, su / sw, sv / sw, sbu / sw, sbv / sw)
     return n_nbr
@@ -185,16 +190,17 @@ def center_normal_rows(acc, ca, sa, cu, cv, du, dv):
 
 
 @njit(cache=True)
-def add_point(acc, u, v, h, r2, beta, ca, sa, slab, bu=0.0, bv=0.0, has_normal=False):
+def add_point(acc, u, v, h, r2, beta, ca, sa, slab, bu=0.0, bv=0.0, has_normal=False,
+              point_weight=1.0):
     """Add one neighbor at frame coordinates (u, v, h), squared distance r2 (units of the
     radius), to the accumulator rows of the half-sets whose slabs hold it; with
     ``has_normal`` also its normal row, (bu, bv) the tangent components of n_p (before
-    :func:`center_normal_rows`)."""
+    :func:`center_normal_rows`); its weight is multiplied by ``point_weight``."""
     t2 = u * u + v * v
     if t2 <= 0.0:
         return
     ndir = ca.shape[0]
-    w = (1.0 - beta) + beta * (1.0 - r2) ** WEIGHT_POWER
+    w = ((1.0 - beta) + beta * (1.0 - r2) ** WEIGHT_POWER) * point_weight
     c2 = (u * u - v * v) / t2
     s2 = 2.0 * u * v / t2
     wr = w * r2

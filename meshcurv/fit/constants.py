@@ -30,3 +30,27 @@ STATUS_TOO_FEW_HALF_SETS = 4
 STATUS_ILL_POSED_FIT = 5
 STATUS_DEGENERATE_DIRECTIONS = 6
 STATUS_OUT_OF_RANGE = 7
+STATUS_OUTLIER = 8
+
+# Tukey biweight of the point-outlier pass (:mod:`meshcurv.fit.outliers`): a point whose
+# residual from its neighborhood's robust cubic fit exceeds TUKEY_C robust scales gets weight 0
+# and is flagged (STATUS_OUTLIER). 4.685 is the biweight's usual tuning constant (95 %
+# efficiency under Gaussian noise): Gaussian noise alone exceeds it at 3 points in a million.
+TUKEY_C = 4.685
+
+# Outlier scores up to which a point keeps its full weight in the later fits: two robust
+# sigmas, what Gaussian noise gives 95 % of the points. The weight then descends as Tukey's
+# biweight of the excess to 0 at TUKEY_C, so clean and ordinarily noisy points are weighted
+# exactly as without the outlier pass.
+OUTLIER_TRUSTED = 2.0
+
+# Reweighting rounds of that robust fit after its least-squares start (measured: the spike
+# residuals and the scale settle after 2-3; the default weights change by < 1e-3 beyond 3).
+OUTLIER_ITERATIONS = 3
+
+# Least robust scale of that pass, as a fraction of the radius: on clean samples the cubic's
+# residuals are rounding or sampling-sized and their MAD can be arbitrarily small, so any
+# point would read as an outlier. Below the noise level at which weighting="auto" starts to
+# count noise (meshcurv.pipeline.NOISE_SCALE, 2e-3), above the cubic's residual on clean
+# samples of the test surfaces.
+OUTLIER_SCALE_FLOOR = 1e-3

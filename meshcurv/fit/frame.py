@@ -8,7 +8,7 @@ import math
 from numba import njit
 
 @njit(cache=True)
-def tangent_frame(points, nbr, lo, hi, x, n, r2max, tu, tv, rank):
+def tangent_frame(points, nbr, lo, hi, x, n, r2max, tu, tv, rank, point_weights=None):
     """Tangent frame (tu, tv, n) that rotates with the data.
 
     tu is the tangential part of the offset to the neighbor of lowest index lying at least
@@ -17,6 +17,8 @@ def tangent_frame(points, nbr, lo, hi, x, n, r2max, tu, tv, rank):
     sampling planes - is equivariant under rotation, translation and scaling. Falls back to a
     fixed frame if there is no such neighbor. ``rank`` (or None: the row itself) is the index
     of each row of ``points``, for points stored in another order than the input's.
+    Neighbors of weight 0 in ``point_weights`` (per row, optional) are passed over: a point
+    left out of the fits does not turn their planes either.
     """
     found = False
     best = -1
@@ -24,6 +26,8 @@ def tangent_frame(points, nbr, lo, hi, x, n, r2max, tu, tv, rank):
         k = nbr[j]
         key = k if rank is None else rank[k]
         if found and key >= best:
+            continue
+        if point_weights is not None and not point_weights[k] > 0.0:
             continue
         qx = points[k, 0] - x[0]
         qy = points[k, 1] - x[1]

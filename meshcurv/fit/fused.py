@@ -25,7 +25,7 @@ __all__ = ["curvature_cga", "estimate_one", "sampling_planes", "cache_is_warm"]
 
 @njit(cache=True)
 def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, work, tu, tv,
-                 point_normals=None, noise=np.nan, normal_gain=1.0):
+                 point_normals=None, noise=np.nan, normal_gain=1.0, point_weights=None):
     """Circle fits in 2 ndir half-sets around one point x, then the Euler model fit.
 
     Parameters
@@ -44,6 +44,7 @@ def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, wo
         fit then also fits its neighbors' normals
         (:func:`meshcurv.fit.circle.circle_fit`), weighted by
         :func:`meshcurv.fit.circle.normal_row_weight`.
+    point_weights : (n,) float64 in [0, 1] or None, see :func:`curvature_cga`
 
     Returns
     -------
@@ -58,9 +59,10 @@ def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, wo
     acc, kappa, rows, active, scratch, mat, rhs, sol, b3, ev, mix = work
     inv_r = 1.0 / radius
     r2max = radius * radius
-    tangent_frame(points, nbr, lo, hi, x, n, r2max, tu, tv, rank)
+    tangent_frame(points, nbr, lo, hi, x, n, r2max, tu, tv, rank, point_weights)
     n_nbr = accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta,
-                                 (ca, sa), slab, acc, point_normals)
+                                 (ca, sa), slab, acc, point_normals,
+                                 point_weights)
     mu = 0.0
     if point_normals is not None:
         mu = normal_gain * normal_row_weight(acc, ndir, min_points, min_spread,
@@ -119,7 +121,8 @@ def _write_directions(q, theta1, tu, tv, n, d1, d2):
 
 @njit(parallel=True, cache=True)
 def curvature_cga(points, query_points, query_normals, indptr, indices, radius, blend, opts,
-                  out, rank=None, point_normals=None, noise=None, normal_gain=None):
+                  out, rank=None, point_normals=None, noise=None, normal_gain=None,
+                  point_weights=None):
     """Fused CGA circle-fit estimator over query points with CSR neighbor lists.
 
     Parameters
@@ -150,6 +153,9 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
         factor in [0, 1] on the normal rows' weight: the circle fits then also fit the normals'
         turn (normal-aware circle fits; see :func:`estimate_one`).
         ``query_normals`` still sets each frame.
+    point_weights : (n,) float64 in [0, 1], optional, per row of ``points``: multiplies each
+        neighbor's weight in the circle fits (the outlier pass's weights,
+        :func:`meshcurv.fit.outliers.outlier_weight`); default 1.
     """
     k1, k2, d1, d2, n_samples, residual, n_neighbors, status = out
     ndir = opts[0]
@@ -180,12 +186,13 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
                 if point_normals is None:
                     e1, e2, theta1, used, rms, n_nbr, why = estimate_one(
                         points, indices, indptr[q], indptr[q + 1], x, n, rank, radius,
-                        blend[q], opts, planes, work, tu, tv)
+                        blend[q], opts, planes, work, tu, tv, None, np.nan, 1.0,
+                        point_weights)
                 else:
                     e1, e2, theta1, used, rms, n_nbr, why = estimate_one(
                         points, indices, indptr[q], indptr[q + 1], x, n, rank, radius,
                         blend[q], opts, planes, work, tu, tv, point_normals, noise[q],
-                        normal_gain[q])
+                        normal_gain[q], point_weights)
             if why == STATUS_OK and not np.isfinite(e1):
                 why = STATUS_ILL_POSED_FIT
             status[q] = why

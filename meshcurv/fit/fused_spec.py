@@ -19,7 +19,8 @@ __all__ = ["curvature_at_point"]
 def curvature_at_point(x, n, neighbors, radius, n_directions=8, slab=0.25, min_points=3,
                        min_spread=0.25, blend=1.0, circle_normalization="tangent",
                        section_blend=True, half_frequency=False, robust=True,
-                       neighbor_normals=None, noise=np.nan, normal_gain=1.0):
+                       neighbor_normals=None, noise=np.nan, normal_gain=1.0,
+                       point_weights=None):
     """Principal curvatures at one point from its neighbors (the kernel's contract, in numpy).
 
     Parameters
@@ -31,6 +32,8 @@ def curvature_at_point(x, n, neighbors, radius, n_directions=8, slab=0.25, min_p
     radius : float, model units; ``slab`` and ``min_spread`` are fractions of it
     blend : float in [0, 1], weights ``(1 - blend) + blend (1 - r^2 / radius^2)^WEIGHT_POWER``
         (see :func:`meshcurv.pipeline.weight_blend`)
+    point_weights : (k,) float in [0, 1], optional, per neighbor: multiplies its weight;
+        neighbors of weight 0 join no half-set and set no frame (the outlier pass's weights)
     other parameters : as in :func:`meshcurv.principal_curvatures`
     neighbor_normals : (k, 3) float, optional, unit normals of ``neighbors`` (NaN: unknown):
         normal-aware circle fits, each half-set's normal rows
@@ -49,20 +52,21 @@ def curvature_at_point(x, n, neighbors, radius, n_directions=8, slab=0.25, min_p
     n = n / np.linalg.norm(n)
     q = np.asarray(neighbors, dtype=np.float64) - x
     d2 = np.einsum("ij,ij->i", q, q)
-    inball = (d2 > 0) & (d2 <= radius * radius)
-    q = q[inball]
-    tu = tangent_u(q, n)
+    ball = (d2 > 0) & (d2 <= radius * radius)
+    pw = np.ones(len(q)) if point_weights is None else np.asarray(point_weights, float)
+    q, pw = q[ball], pw[ball]
+    tu = tangent_u(q[pw > 0], n)
     tv = np.cross(n, tu)
     q = q / radius  # all fits in units of the radius
     u, v = q @ tu, q @ tv
-    keep = u * u + v * v > 0
-    q, u, v = q[keep], u[keep], v[keep]
+    keep = (u * u + v * v > 0) & (pw > 0)
+    q, u, v, pw = q[keep], u[keep], v[keep], pw[keep]
     r2 = np.einsum("ij,ij->i", q, q)
     phi = np.arctan2(v, u)
-    w = (1 - blend) + blend * (1 - r2) ** WEIGHT_POWER
+    w = ((1 - blend) + blend * (1 - r2) ** WEIGHT_POWER) * pw
     turn_uv = None
     if neighbor_normals is not None:
-        nb = np.asarray(neighbor_normals, dtype=np.float64)[inball][keep]
+        nb = np.asarray(neighbor_normals, dtype=np.float64)[ball][keep]
         nb = np.where((nb @ n < 0)[:, None], -nb, nb)     # turned round to face like n
         turn_uv = np.column_stack([nb @ tu, nb @ tv])
         has = np.isfinite(turn_uv).all(axis=1)

@@ -34,7 +34,8 @@ def _add_monomials(moments, c, u, v, degree):
 
 
 @njit(parallel=True, cache=True)
-def local_jet(points, query_points, normals, indptr, indices, radius, refine, noise):
+def local_jet(points, query_points, normals, indptr, indices, radius, refine, noise,
+              point_weights=None):
     """Local height fits around each query point: noise level (quartic) and normal (quadric).
 
     In a frame (tu, tv, n) around each query point x, the heights of its neighbors within
@@ -59,6 +60,8 @@ def local_jet(points, query_points, normals, indptr, indices, radius, refine, no
         both are (fewer than 11 well-spread points), and there the normal is left unchanged -
         as it is where the quadric would tilt it by more than 30 degrees (no graph over n,
         e.g. at a crease).
+    point_weights : (n,) float64 in [0, 1], optional: each neighbor's weight is multiplied by
+        it (the outlier pass's weights); neighbors of weight 0 are left out.
     """
     m = query_points.shape[0]
     r2max = radius * radius
@@ -108,10 +111,13 @@ def local_jet(points, query_points, normals, indptr, indices, radius, refine, no
                                                       inv_r)
                 if not inside:
                     continue
+                pw = 1.0 if point_weights is None else point_weights[indices[j]]
+                if pw <= 0.0:
+                    continue
                 u = qx * t0 + qy * t1 + qz * t2
                 v = qx * b0 + qy * b1 + qz * b2
                 h = qx * n0 + qy * n1 + qz * n2
-                w = 1.0 - r2
+                w = (1.0 - r2) * pw
                 _add_monomials(mom, w, u, v, 8)
                 _add_monomials(hmom, w * h, u, v, 4)
                 sw += w

@@ -6,14 +6,17 @@ import numpy as np
 __all__ = ["local_jet"]
 
 
-def local_jet(x, n, neighbors, radius):
-    """Quartic (cubic) and quadric height fits around x (:func:`meshcurv.fit.jet.local_jet` in numpy).
+def local_jet(x, n, neighbors, radius, point_weights=None):
+    """Quartic (cubic) and quadric height fits around x (:func:`meshcurv.fit.jet.local_jet` in
+    numpy).
 
     Parameters
     ----------
     x, n : (3,) float, the point and its initial unit normal
     neighbors : (k, 3) float; points beyond ``radius`` and x itself are ignored
     radius : float, model units
+    point_weights : (k,) float in [0, 1], optional, per neighbor: multiplies its weight;
+        neighbors of weight 0 are left out (the outlier pass's weights)
 
     Returns
     -------
@@ -31,12 +34,14 @@ def local_jet(x, n, neighbors, radius):
     tv = np.cross(n, tu)
     q = np.asarray(neighbors, dtype=np.float64) - x
     d2 = np.einsum("ij,ij->i", q, q)
-    q = np.vstack([np.zeros(3), q[(d2 > 0) & (d2 <= radius * radius)] / radius])  # x included
+    pw = np.ones(len(q)) if point_weights is None else np.asarray(point_weights, float)
+    use = (d2 > 0) & (d2 <= radius * radius) & (pw > 0)
+    q = np.vstack([np.zeros(3), q[use] / radius])  # x included
     u, v, h = q @ tu, q @ tv, q @ n
     design = np.column_stack([u * u, u * v, v * v, u, v, np.ones_like(u),
                               u ** 3, u * u * v, u * v * v, v ** 3,
                               u ** 4, u ** 3 * v, u * u * v * v, u * v ** 3, v ** 4])
-    w = 1 - np.einsum("ij,ij->i", q, q)
+    w = (1 - np.einsum("ij,ij->i", q, q)) * np.concatenate([[1.0], pw[use]])
     w[0] = 1.0
     lhs = design.T @ (w[:, None] * design)
     for npar in (15, 10):

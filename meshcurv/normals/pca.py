@@ -10,14 +10,15 @@ from ..linalg import CHUNK, ball_offset, smallest_eigvec_jacobi3
 __all__ = ["pca_normals", "pca_normals_csr"]
 
 @njit(parallel=True, cache=True)
-def pca_normals_csr(points, query_points, indptr, indices, radius):
+def pca_normals_csr(points, query_points, indptr, indices, radius, point_weights=None):
     """Unit normals (m, 3) of the least-squares plane through each query point's neighbors.
 
     The covariance of the neighbors within ``radius`` (the point included) is accumulated
     about the query point in units of ``radius`` (precise at large offsets) and corrected to
     the centroid; its smallest eigenvector comes from Jacobi rotations. NaN rows
     where fewer than 3 points lie in the ball or the covariance is not finite. Signs are
-    arbitrary (the orientation step fixes them).
+    arbitrary (the orientation step fixes them). ``point_weights`` (n,) in [0, 1], optional:
+    each neighbor's weight in the covariance (the outlier pass's; the query point's is 1).
     """
     m = query_points.shape[0]
     out = np.full((m, 3), np.nan)
@@ -33,22 +34,27 @@ def pca_normals_csr(points, query_points, indptr, indices, radius):
             x2 = query_points[q, 2]
             s0 = s1 = s2 = 0.0
             s00 = s01 = s02 = s11 = s12 = s22 = 0.0
-            c = 1
+            c = 1.0
+            k = 1
             for j in range(indptr[q], indptr[q + 1]):
                 inside, a, b, d, _ = ball_offset(points, indices[j], x0, x1, x2, r2max, inv_r)
                 if not inside:
                     continue
-                c += 1
-                s0 += a
-                s1 += b
-                s2 += d
-                s00 += a * a
-                s01 += a * b
-                s02 += a * d
-                s11 += b * b
-                s12 += b * d
-                s22 += d * d
-            if c < 3:
+                w = 1.0 if point_weights is None else point_weights[indices[j]]
+                if w <= 0.0:
+                    continue
+                k += 1
+                c += w
+                s0 += w * a
+                s1 += w * b
+                s2 += w * d
+                s00 += w * a * a
+                s01 += w * a * b
+                s02 += w * a * d
+                s11 += w * b * b
+                s12 += w * b * d
+                s22 += w * d * d
+            if k < 3:
                 continue
             m0 = s0 / c
             m1 = s1 / c
@@ -76,13 +82,14 @@ def pca_normals_csr(points, query_points, indptr, indices, radius):
     return out
 
 
-def pca_normals(points, query_points, indptr, indices, radius):
+def pca_normals(points, query_points, indptr, indices, radius, point_weights=None):
     """Normals of the least-squares plane through each query point's neighborhood (PCA).
 
     Parameters
     ----------
     points : (n, 3) float64; query_points : (m, 3) float64
     indptr, indices : CSR neighbor lists into ``points``; radius : float, model units
+    point_weights : (n,) float64 in [0, 1], optional, the neighbors' weights (default 1)
 
     Returns
     -------
@@ -91,4 +98,4 @@ def pca_normals(points, query_points, indptr, indices, radius):
     # covariance and its smallest eigenvector (Jacobi, to machine precision) in one kernel
     return pca_normals_csr(np.ascontiguousarray(points, dtype=np.float64),
                                    np.ascontiguousarray(query_points, dtype=np.float64),
-                                   indptr, indices, float(radius))
+                                   indptr, indices, float(radius), point_weights)

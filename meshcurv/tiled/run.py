@@ -161,9 +161,11 @@ def _curvature_stage(stages, names, tiles, flips, report):
 
 
 def _halo_reach(options):
-    """Radii the halo covers: 2 with normal-aware circle fits (a neighbor's estimated normal
-    needs its own full ball), else 1."""
-    return 1 if options.get("normal_constraints", "auto") == "off" else 2
+    """Radii the halo covers: 1, plus 1 with normal-aware circle fits (a neighbor's estimated
+    normal needs its own full ball), plus 1 with the outlier pass (the points of that ball are
+    scored on their own balls)."""
+    return (1 + (options.get("normal_constraints", "auto") != "off")
+            + bool(options.get("robust_points", True)))
 
 
 def annotate_tiled(in_path, out_path, radius=None, tile_size=None, *, orientation="mst",

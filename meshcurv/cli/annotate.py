@@ -102,8 +102,8 @@ def radius_in_model_units(spec, diagonal):
     if spec is None:
         return None
     radii = parse_radius_list(spec)
-    scale = diagonal() / 100.0 if any(percent for _, percent in radii) else None
-    absolute = [value * scale if percent else value for value, percent in radii]
+    diag = diagonal() if any(percent for _, percent in radii) else None
+    absolute = [value / 100.0 * diag if percent else value for value, percent in radii]
     return absolute if is_radius_list(spec) else absolute[0]
 
 

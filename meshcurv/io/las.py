@@ -302,7 +302,7 @@ def read_las_cloud(path, chunk_size=DEFAULT_CHUNK, fields=CURVATURE_FIELDS):
         curvature fields of an annotated file), in their stored type
     """
     with open_las(path) as reader:
-        names = reader.header.point_format.extra_dimension_names
+        names = list(reader.header.point_format.extra_dimension_names)
     have = {n.lower(): n for n in names}
     wanted = {f: have[f.lower()] for f in fields if f.lower() in have}
     wanted.update({n: n for n in names if split_radius_suffix(n)[1]

@@ -183,7 +183,8 @@ def test_info_lists_each_radius_with_its_fields(capsys, annotated_mesh, torus, m
         f"radius 6% = {mesh_radii[2]:.6g} (fields k1_r6pct ...):"]
     results = meshcurv.principal_curvatures(torus.vertices, torus.faces, radius=mesh_radii)
     for i, res, suffix in zip(heads, results, SUFFIXES):
-        assert lines[i + 1] == f"valid: {int(res.valid.sum())} of {n} ({100 * res.valid.mean():.1f} %)"
+        share = f"{100 * res.valid.mean():.1f}"
+        assert lines[i + 1] == f"valid: {int(res.valid.sum())} of {n} ({share} %)"
         row = next(line for line in lines[i:] if line.startswith("k1" + suffix + " "))
         k1 = res.k1[res.valid]
         assert float(row.split()[3]) == pytest.approx(np.median(k1), rel=1e-4)  # 5 digits

@@ -196,12 +196,13 @@ def _cmd_annotate(args):
     except io.MeshFileError as exc:
         raise CommandError(str(exc), 2) from None
     if io.file_extension(args.output) in las_ext:
-        try:
-            io.las.new_dimension_names(radius_suffixes(options.radius))
+        suffixes = radius_suffixes(options.radius)
+        try:  # a radius too long for LAS names is the command line's error
+            io.las.new_dimension_names(suffixes)
         except ValueError as exc:
             raise CommandError(str(exc), 2) from None
-    if io.file_extension(args.output) in las_ext and os.path.isfile(args.input):
-        check_las_output(args.input, args.output, radius_suffixes(options.radius))
+        if os.path.isfile(args.input):
+            check_las_output(args.input, args.output, suffixes)
     s = annotate_file(args.input, args.output, options, preview=args.preview,
                       progress=args.progress)
     if s["n_nonfinite"]:

@@ -15,7 +15,8 @@ from .. import io, shape
 from ..options import check_options
 
 __all__ = ["CommandError", "AnnotateOptions", "parse_radius", "parse_radius_list",
-           "is_radius_list", "radius_in_model_units", "radius_suffixes", "check_annotate_options", "orientation_for", "orientation_line", "annotate_file",
+           "is_radius_list", "radius_in_model_units", "radius_suffixes",
+           "check_annotate_options", "orientation_for", "orientation_line", "annotate_file",
            "write_preview"]
 
 

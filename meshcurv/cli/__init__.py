@@ -17,7 +17,7 @@ import numpy as np
 
 from .. import io, shape
 from .annotate import AnnotateOptions, CommandError, annotate_file, check_annotate_options, \
-    orientation_line
+    orientation_line, radius_suffixes
 from .batch import BatchInterrupted, failure_text, run_batch
 from .info import info_text
 from .tiles import annotate_tiled_command, check_las_output
@@ -34,7 +34,10 @@ Sign: for OUTWARD normals, convex positive: a sphere of radius r gives k1 = k2 =
 (counter-clockwise seen from outside); point clouds use their normals or estimate and orient
 them (flip the cloud's normals to flip every sign).
 Radius: in model units (--radius 0.05) or in percent of the bounding-box diagonal (--radius 2%),
-as in MeshLab; default: the radius whose ball holds about 100 points.
+as in MeshLab; default: the radius whose ball holds about 100 points. A list (--radius 0.5,1,2)
+estimates at every radius in one pass and names each radius's fields with a suffix: k1_r0p5,
+k1_r1, k1_r2 ("." written "p", "-" "m", "%" "pct": k1_r2pct), so that the names stay
+identifiers in PDAL, laspy and Python; normals, quality and colour are the first radius's.
 Vertices are never reordered, merged or dropped (STL corners are merged by position on reading);
 vertices without an estimate have NaN curvature, valid = 0, quality 0 and a grey colour.
 
@@ -42,7 +45,9 @@ Exit codes: 0 success, 1 a file could not be processed, 2 command-line error."""
 
 
 _RADIUS_HELP = ("neighborhood radius: a number in model units (0.05) or a percentage of the "
-                "bounding-box diagonal (2%%); default: the radius whose ball holds ~100 points")
+                "bounding-box diagonal (2%%); default: the radius whose ball holds ~100 points. "
+                "A comma-separated list (0.5,1,2) writes the fields of every radius, named "
+                "k1_r0p5, k1_r1, k1_r2 ...")
 
 
 def _add_estimation_options(p):
@@ -190,19 +195,35 @@ def _cmd_annotate(args):
         io.check_distinct(args.input, args.output)
     except io.MeshFileError as exc:
         raise CommandError(str(exc), 2) from None
-    if io.file_extension(args.output) in las_ext and os.path.isfile(args.input):
-        check_las_output(args.input, args.output)
+    if io.file_extension(args.output) in las_ext:
+        suffixes = radius_suffixes(options.radius)
+        try:  # a radius too long for LAS names is the command line's error
+            io.las.new_dimension_names(suffixes)
+        except ValueError as exc:
+            raise CommandError(str(exc), 2) from None
+        if os.path.isfile(args.input):
+            check_las_output(args.input, args.output, suffixes)
     s = annotate_file(args.input, args.output, options, preview=args.preview,
                       progress=args.progress)
     if s["n_nonfinite"]:
         print(f"meshcurv: warning: {s['n_nonfinite']} vertices have non-finite coordinates; "
               "their curvature is NaN", file=sys.stderr)
-    print(f"{s['output']}: {s['n_valid']} of {s['n_vertices']} vertices estimated, radius "
-          f"{s['radius']:.6g} (model units), {s['seconds']:.1f} s")
+    print(_summary_line(s))
     print(orientation_line(s["orientation"], args.input, options))
     if args.preview:
         print(f"{args.preview}: preview coloured by shape index")
     return 0
+
+
+def _summary_line(s):
+    """The line ``annotate`` prints for the summary ``s`` of :func:`annotate_file`."""
+    if s["suffixes"] is None:
+        return (f"{s['output']}: {s['n_valid']} of {s['n_vertices']} vertices estimated, "
+                f"radius {s['radius']:.6g} (model units), {s['seconds']:.1f} s")
+    per_radius = [f"{n} at radius {r:.6g} (*{suffix})" for n, r, suffix in
+                  zip(s["n_valid_per_radius"], s["radii"], s["suffixes"])]
+    return (f"{s['output']}: of {s['n_vertices']} vertices, estimated {', '.join(per_radius)} "
+            f"(model units; fields k1{s['suffixes'][0]} ...), {s['seconds']:.1f} s")
 
 
 def _cmd_batch(args):

@@ -14,7 +14,8 @@ import numpy as np
 from .. import io, shape
 from ..options import check_options
 
-__all__ = ["CommandError", "AnnotateOptions", "parse_radius", "radius_in_model_units",
+__all__ = ["CommandError", "AnnotateOptions", "parse_radius", "parse_radius_list",
+           "is_radius_list", "radius_in_model_units", "radius_suffixes",
            "check_annotate_options", "orientation_for", "orientation_line", "annotate_file",
            "write_preview"]
 
@@ -31,7 +32,9 @@ class CommandError(Exception):
 class AnnotateOptions:
     """Estimation and output options shared by ``annotate`` and ``batch`` (picklable).
 
-    radius : str or None, "2%" (of the bbox diagonal) or "0.05" (model units); None = default
+    radius : str or None, "2%" (of the bbox diagonal) or "0.05" (model units), or a comma-
+        separated list of them ("0.5,1,2": every radius, fields named per radius, see
+        :func:`radius_suffixes`); None = default
     directions : int, planes through the normal (2 x directions circle fits)
     neighborhood : "auto" | "kring" | "ball"
     normals : "auto" (file normals for point clouds that have them, else estimated) |
@@ -68,13 +71,50 @@ def parse_radius(text):
     return value, percent
 
 
+def parse_radius_list(text):
+    """Parse a radius option that may list several radii: ``"0.5,2%"`` -> [(0.5, False),
+    (2.0, True)]; one radius without a comma -> [(value, percent)].
+
+    Raises ValueError (one line) for an empty item, an item :func:`parse_radius` refuses, or
+    a radius listed twice (0.5 and 5e-1 are the same radius: their fields would have the
+    same names).
+    """
+    items = str(text).split(",")
+    if len(items) > 1 and not all(item.strip() for item in items):
+        raise ValueError(f"radius list has an empty item, got {text!r}")
+    radii = [parse_radius(item) for item in items]
+    suffixes = [io.radius_suffix(value, percent) for value, percent in radii]
+    for i, suffix in enumerate(suffixes):
+        if suffix in suffixes[:i]:
+            raise ValueError(f"radius list names the radius {items[i].strip()} twice, got "
+                             f"{text!r}")
+    return radii
+
+
+def is_radius_list(spec):
+    """Whether the radius option ``spec`` (str or None) lists several radii."""
+    return spec is not None and "," in str(spec)
+
+
 def radius_in_model_units(spec, diagonal):
-    """Absolute radius for ``spec`` ("2%", "0.05" or None = the estimator's default);
-    ``diagonal()`` gives the bounding-box diagonal a percentage refers to."""
+    """Absolute radius for ``spec`` ("2%", "0.05" or None = the estimator's default), or the
+    list of them for a list ("0.5,2%"); ``diagonal()`` gives the bounding-box diagonal a
+    percentage refers to."""
     if spec is None:
         return None
-    value, percent = parse_radius(spec)
-    return value / 100.0 * diagonal() if percent else value
+    radii = parse_radius_list(spec)
+    diag = diagonal() if any(percent for _, percent in radii) else None
+    absolute = [value / 100.0 * diag if percent else value for value, percent in radii]
+    return absolute if is_radius_list(spec) else absolute[0]
+
+
+def radius_suffixes(spec):
+    """The suffix naming each radius's fields in the output for a list ``spec`` ("0.5,1,2%"
+    -> ["_r0p5", "_r1", "_r2pct"], see :func:`meshcurv.io.radius_suffix`); None for one
+    radius, whose fields keep their plain names (``k1``)."""
+    if not is_radius_list(spec):
+        return None
+    return [io.radius_suffix(value, percent) for value, percent in parse_radius_list(spec)]
 
 
 def orientation_for(input_path, options):
@@ -101,7 +141,7 @@ def check_annotate_options(options):
     """Raise CommandError(code 2) for option values no file can fix."""
     try:
         if options.radius is not None:
-            parse_radius(options.radius)
+            parse_radius_list(options.radius)
         if options.quality not in shape.FIELDS:
             raise ValueError(f"--quality must be one of {', '.join(shape.FIELDS)}")
         if options.colormap.lower() not in (c.lower() for c in shape.COLORMAPS):
@@ -132,8 +172,14 @@ def annotate_file(input_path, output_path, options=AnnotateOptions(), preview=No
                   progress=False):
     """Read ``input_path``, estimate curvatures, write the annotated PLY ``output_path``.
 
+    With a list of radii (``options.radius`` "0.5,1,2"), one estimate per radius (one ball
+    search over the largest), each radius's fields named with its suffix
+    (:func:`radius_suffixes`); the normals, quality, colour and preview are the first radius's.
+
     Returns a dict of summary values (``n_vertices, n_faces, n_valid, radius, seconds`` and
-    ``orientation``, the result's note on how the normals got their sign).
+    ``orientation``, the result's note on how the normals got their sign; ``radii``,
+    ``n_valid_per_radius`` and ``suffixes`` list every radius, ``suffixes`` None for one
+    radius; ``n_valid``, ``radius`` and ``orientation`` are the first radius's).
     Raises :class:`meshcurv.io.MeshFileError` or ValueError (message names the file) for bad
     input; no output file is left behind then.
     """
@@ -149,20 +195,30 @@ def annotate_file(input_path, output_path, options=AnnotateOptions(), preview=No
         raise io.MeshFileError(f"{input_path}: too few points ({n_finite}) for a curvature "
                                "estimate")
     radius = radius_in_model_units(options.radius, lambda: io.bbox_diagonal(data.vertices))
+    suffixes = radius_suffixes(options.radius)
     try:
-        result = principal_curvatures(
+        results = principal_curvatures(
             data.vertices, None if data.is_point_cloud else data.faces,
             normals=_normals_for(data, options.normals), radius=radius,
             n_directions=int(options.directions), neighborhood=options.neighborhood,
             orientation=orientation_for(input_path, options), progress=progress)
     except ValueError as exc:
         raise io.MeshFileError(f"{input_path}: {exc}") from exc
-    n_valid = int(result.valid.sum())
-    if n_valid == 0:
-        raise io.MeshFileError(f"{input_path}: no vertex got a curvature estimate "
-                               f"({len(data.vertices)} vertices): "
-                               f"{no_estimate_reason(result, n_finite, '--radius')}")
-    io.write(output_path, data, result, quality=options.quality, colormap=options.colormap)
+    if suffixes is None:
+        results = [results]
+    n_valid = [int(res.valid.sum()) for res in results]
+    for res, count in zip(results, n_valid):
+        if count == 0:
+            at = f" at radius {res.radius:.6g}" if suffixes is not None else ""
+            raise io.MeshFileError(f"{input_path}: no vertex got a curvature estimate{at} "
+                                   f"({len(data.vertices)} vertices): "
+                                   f"{no_estimate_reason(res, n_finite, '--radius')}")
+    result = results[0]
+    if suffixes is None:
+        io.write(output_path, data, result, quality=options.quality, colormap=options.colormap)
+    else:
+        io.write(output_path, data, results, quality=options.quality,
+                 colormap=options.colormap, suffixes=suffixes)
     if preview is not None:
         try:
             write_preview(preview, data, result)
@@ -172,8 +228,10 @@ def annotate_file(input_path, output_path, options=AnnotateOptions(), preview=No
     return {"input": os.fspath(input_path), "output": os.fspath(output_path),
             "n_vertices": len(data.vertices),
             "n_faces": 0 if data.is_point_cloud else len(data.faces),
-            "n_valid": n_valid, "n_nonfinite": len(data.vertices) - n_finite,
+            "n_valid": n_valid[0], "n_nonfinite": len(data.vertices) - n_finite,
             "radius": result.radius, "orientation": result.orientation,
+            "radii": [res.radius for res in results], "n_valid_per_radius": n_valid,
+            "suffixes": suffixes,
             "seconds": time.perf_counter() - t0}
 
 

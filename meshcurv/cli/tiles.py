@@ -8,7 +8,8 @@ import sys
 import numpy as np
 
 from .. import io
-from .annotate import CommandError, orientation_for, orientation_line, radius_in_model_units
+from .annotate import (CommandError, is_radius_list, orientation_for, orientation_line,
+                       radius_in_model_units)
 from .batch import dask_client
 
 __all__ = ["annotate_tiled_command", "check_las_output"]
@@ -24,13 +25,15 @@ def _las_bbox_diagonal(path):
     return float(np.linalg.norm(hi - lo))
 
 
-def check_las_output(in_path, out_path):
-    """Before any work on a LAS/LAZ output: refuse an input that already has curvature
-    dimensions, and say when the output gets another LAS version than the input (1.0)."""
+def check_las_output(in_path, out_path, suffixes=None):
+    """Before any work on a LAS/LAZ output: refuse an input that already has the curvature
+    dimensions to be added (named with ``suffixes`` for several radii, see
+    :func:`meshcurv.io.las.check_annotatable`), and say when the output gets another LAS
+    version than the input (1.0)."""
     las = io.las_module(in_path)
     with las.open_las(in_path) as reader:  # one header read for both checks
         header = reader.header
-    las.check_annotatable(in_path, header=header)
+    las.check_annotatable(in_path, header=header, suffixes=suffixes)
     version_in, version_out = las.output_version(header)
     if version_out != version_in:
         print(f"meshcurv: note: {in_path} is LAS {version_in}, which laspy cannot write; "
@@ -51,6 +54,9 @@ def _check_tiled_arguments(args, options):
                            "(the cloud is never in memory as a whole)", 2)
     if options.neighborhood == "kring":
         raise CommandError("--neighborhood kring needs mesh faces; a LAS/LAZ cloud uses ball", 2)
+    if is_radius_list(options.radius):
+        raise CommandError("--tile-size and --dask-scheduler take one --radius, not a list "
+                           "(annotate without them for several radii, or once per radius)", 2)
     if options.normals != "auto":
         raise CommandError("--normals: tiled runs use the file's normals when it has them and "
                            "estimate them otherwise (--normals auto)", 2)

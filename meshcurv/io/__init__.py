@@ -39,7 +39,7 @@ from . import data as _data
 from . import las, obj, off, ply, stl, xyz
 from .atomic import PARTIAL_SUFFIX, atomic_write, check_distinct, remove_stale_partials
 from .data import (MeshData, MeshFileError, bbox_diagonal, file_extension, first_line,
-                   usable_normals)
+                   radius_suffix, split_radius_suffix, suffix_radius_text, usable_normals)
 from .las import read_las, write_las
 from .obj import read_obj
 from .off import read_off
@@ -51,7 +51,8 @@ from .xyz import read_xyz
 __all__ = ["MeshData", "MeshFileError", "READERS", "WRITERS", "register_reader",
            "register_writer", "read", "write", "write_ply", "write_annotated", "atomic_write",
            "check_distinct", "bbox_diagonal", "ANNOTATED_FIELDS",
-           "PLY_PREFIX", "ply_property", "ply_field_names"]
+           "PLY_PREFIX", "ply_property", "ply_field_names", "radius_suffix",
+           "split_radius_suffix", "suffix_radius_text"]
 
 # Reader and writer of each file extension (".ply"), from the tables of the format modules.
 READERS = {**ply.readers, **obj.readers, **off.readers, **stl.readers, **xyz.readers,
@@ -65,7 +66,8 @@ def register_reader(extension, reader):
 
 
 def register_writer(extension, writer):
-    """Register ``writer(path, data, result, quality=, colormap=, clamp=)`` for ``extension``."""
+    """Register ``writer(path, data, result, quality=, colormap=, clamp=)`` for ``extension``
+    (and ``suffixes=`` to write several radii, see :func:`write`)."""
     WRITERS[extension.lower()] = writer
 
 
@@ -171,8 +173,10 @@ def write(path, data, result, **options):
     path : str, the output; .ply (:func:`write_annotated`) or .las/.laz (:func:`write_las`,
         for a LAS/LAZ input only)
     data : MeshData, the geometry ``result`` was computed on (``data.path`` is never replaced)
-    result : CurvatureResult, one row per vertex of ``data``
-    **options : ``quality``, ``colormap``, ``clamp`` of :func:`write_annotated`
+    result : CurvatureResult, one row per vertex of ``data``; or a list of them, one per
+        radius, with the option ``suffixes`` naming each radius's fields (``["_r0p5", "_r1"]``,
+        see :func:`radius_suffix`)
+    **options : ``quality``, ``colormap``, ``clamp``, ``suffixes`` of :func:`write_annotated`
 
     Raises MeshFileError (message starting with ``path``) for an extension without a writer.
     """

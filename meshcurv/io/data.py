@@ -12,7 +12,8 @@ from dataclasses import dataclass, field as dc_field
 import numpy as np
 
 __all__ = ["MeshData", "MeshFileError", "first_line", "usable_normals", "bbox_diagonal",
-           "file_extension", "quiet_libraries"]
+           "file_extension", "quiet_libraries", "radius_suffix", "split_radius_suffix",
+           "suffix_radius_text"]
 
 
 class MeshFileError(ValueError):
@@ -69,6 +70,58 @@ def bbox_diagonal(vertices):
     if len(v) == 0:
         return 0.0
     return float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
+
+
+# Field names of a file annotated at several radii: ``<field>_r<radius>`` with the radius in its
+# shortest decimal form and only letters, digits and "_" (a name PDAL's expressions, laspy's
+# attributes and Python accept; "." and "%" are not): "." -> "p", "-" -> "m", "%" -> "pct".
+_SUFFIX_CODES = {".": "p", "-": "m", "+": ""}
+
+
+def radius_suffix(value, percent=False):
+    """The suffix naming the fields of one radius in a file annotated at several radii.
+
+    ``value`` : float > 0, the radius as given (model units, or percent of the bounding-box
+    diagonal when ``percent``). The suffix is ``_r`` + its shortest decimal form (the shortest
+    that reads back as the same float) with "." written "p" and "-" written "m", + ``pct`` for
+    a percentage: distinct radii get distinct suffixes, and equal ones (0.5, 0.50, 5e-1) the
+    same.
+
+    >>> radius_suffix(0.5), radius_suffix(2.0), radius_suffix(2.0, percent=True)
+    ('_r0p5', '_r2', '_r2pct')
+    >>> radius_suffix(1e-05)
+    '_r1em05'
+    """
+    text = repr(float(value))
+    if text.endswith(".0"):
+        text = text[:-2]
+    return "_r" + "".join(_SUFFIX_CODES.get(c, c) for c in text) + ("pct" if percent else "")
+
+
+def split_radius_suffix(name):
+    """``(field, suffix)`` of a field name: ``"k1_r0p5"`` -> ``("k1", "_r0p5")``; a name
+    without a radius suffix (see :func:`radius_suffix`) -> ``(name, "")``.
+
+    >>> split_radius_suffix("shape_index_r2pct"), split_radius_suffix("k1")
+    (('shape_index', '_r2pct'), ('k1', ''))
+    """
+    field, sep, tail = name.rpartition("_r")
+    if (sep and field and tail[:1].isdigit() and tail.isascii() and tail.isalnum()
+            and tail == tail.lower()):
+        return field, sep + tail
+    return name, ""
+
+
+def suffix_radius_text(suffix):
+    """The radius a suffix of :func:`radius_suffix` names, as a user writes it.
+
+    >>> suffix_radius_text("_r0p5"), suffix_radius_text("_r2pct"), suffix_radius_text("_r1em05")
+    ('0.5', '2%', '1e-05')
+    """
+    text = suffix[2:]
+    percent = text.endswith("pct")
+    text = (text[:-3] if percent else text).replace("p", ".").replace("m", "-")
+    return text + ("%" if percent else "")
 
 
 def file_extension(path):

@@ -26,6 +26,12 @@ d2x d2y d2z           float64  unit direction of k2; (d1, d2, normal) is right-h
 NormalX..NormalZ      float64  the unit normal used, only when it was estimated
 ====================  =======  ======================================================
 
+A file annotated at several radii (``meshcurv annotate --radius 0.5,1,2``) has the fields from
+``k1`` to ``d2z`` once per radius, named with the radius's suffix
+(:func:`meshcurv.io.data.radius_suffix`: ``k1_r0p5``, ``k1_r2pct``), and the normals of the
+first radius. LAS names have at most 32 characters (:data:`NAME_LIMIT`), which bounds the
+digits of a radius: a longer name is refused before any work.
+
 Writes are atomic: the output goes to a temporary file in the output's folder and is renamed
 over ``out_path`` only when complete, so a failure never leaves a partial file. The input is
 never overwritten. The output has the input's LAS version, except for LAS 1.0, which laspy
@@ -45,11 +51,12 @@ import numpy as np
 
 from ..result import CURVATURE_FIELDS, curvature_fields
 from .atomic import atomic_write, check_distinct
-from .data import MeshData, MeshFileError, file_extension, first_line
+from .data import MeshData, MeshFileError, file_extension, first_line, split_radius_suffix
 
-__all__ = ["LasReadError", "CURVATURE_FIELDS", "NORMAL_FIELDS", "DEFAULT_CHUNK",
+__all__ = ["LasReadError", "CURVATURE_FIELDS", "NORMAL_FIELDS", "NAME_LIMIT", "DEFAULT_CHUNK",
            "las_point_count", "open_las", "normal_dims", "iter_las_chunks", "read_las_points",
            "read_las_cloud", "result_fields", "output_version", "check_paths",
+           "new_dimension_names",
            "check_annotatable", "annotate_las", "write_las_curvature", "require_laspy",
            "read_las", "write_las", "readers", "writers"]
 
@@ -67,6 +74,8 @@ _INTEGER_FIELDS = ("valid", "status")
 _NORMAL_NAMES = (("normalx", "normaly", "normalz"), ("normal_x", "normal_y", "normal_z"),
                  ("nx", "ny", "nz"))
 DEFAULT_CHUNK = 1_000_000
+# Bytes of a dimension's name in the extra-bytes record (LAS 1.4 R15, table 24).
+NAME_LIMIT = 32
 
 
 class LasReadError(OSError):
@@ -170,13 +179,14 @@ def _check_new_dims(path, point_format, names):
                          "annotate the original file")
 
 
-def check_annotatable(path, normals=None, header=None):
+def check_annotatable(path, normals=None, header=None, suffixes=None):
     """The dimensions :func:`write_las_curvature` would add to ``path``; checked before any work.
 
-    ``normals`` as in :func:`write_las_curvature` (None: NormalX..NormalZ when the file has no
-    normals); ``header``: the file's laspy header if the caller has read it already. Raises
-    ValueError when the file already has one of them (an annotated file),
-    :class:`LasReadError` when it cannot be read.
+    ``normals`` and ``suffixes`` as in :func:`write_las_curvature` (None: NormalX..NormalZ when
+    the file has no normals; one radius); ``header``: the file's laspy header if the caller has
+    read it already. Raises ValueError when the file already has one of them (an annotated
+    file) or a name is longer than :data:`NAME_LIMIT`, :class:`LasReadError` when the file
+    cannot be read.
     """
     if header is None:
         with open_las(path) as reader:
@@ -184,8 +194,26 @@ def check_annotatable(path, normals=None, header=None):
     point_format = header.point_format
     if normals is None:
         normals = normal_dims(point_format) is None
-    names = list(CURVATURE_FIELDS) + (list(NORMAL_FIELDS) if normals else [])
+    names = new_dimension_names(suffixes, normals)
     _check_new_dims(path, point_format, names)
+    return names
+
+
+def new_dimension_names(suffixes=None, normals=False):
+    """The extra-bytes dimensions an annotation adds, in order: :data:`CURVATURE_FIELDS` (once
+    per radius, named ``<field><suffix>``, for a list of ``suffixes``), then NormalX..NormalZ
+    when ``normals``. ValueError when a name is longer than :data:`NAME_LIMIT`.
+
+    >>> new_dimension_names(["_r0p5", "_r1"])[:2]
+    ['k1_r0p5', 'k2_r0p5']
+    """
+    names = [f + s for s in (suffixes or [""]) for f in CURVATURE_FIELDS]
+    names += list(NORMAL_FIELDS) if normals else []
+    too_long = [n for n in names if len(n.encode()) > NAME_LIMIT]
+    if too_long:
+        raise ValueError(f"the LAS dimension name {too_long[0]} is longer than the "
+                         f"{NAME_LIMIT} characters LAS allows; write the radius with fewer "
+                         "digits")
     return names
 
 
@@ -263,7 +291,8 @@ def read_las_points(path, chunk_size=DEFAULT_CHUNK):
 
 
 def read_las_cloud(path, chunk_size=DEFAULT_CHUNK, fields=CURVATURE_FIELDS):
-    """All points of a LAS/LAZ file in memory, with the extra dimensions named in ``fields``.
+    """All points of a LAS/LAZ file in memory, with the extra dimensions named in ``fields``
+    (also with a radius suffix: ``k1`` finds ``k1_r0p5`` too).
 
     Returns
     -------
@@ -273,8 +302,11 @@ def read_las_cloud(path, chunk_size=DEFAULT_CHUNK, fields=CURVATURE_FIELDS):
         curvature fields of an annotated file), in their stored type
     """
     with open_las(path) as reader:
-        have = {n.lower(): n for n in reader.header.point_format.extra_dimension_names}
+        names = list(reader.header.point_format.extra_dimension_names)
+    have = {n.lower(): n for n in names}
     wanted = {f: have[f.lower()] for f in fields if f.lower() in have}
+    wanted.update({n: n for n in names if split_radius_suffix(n)[1]
+                   and split_radius_suffix(n)[0] in fields and n not in wanted})
     xyz, nv, found = [], [], {f: [] for f in wanted}
     for _, p, n, rec in iter_las_chunks(path, chunk_size, with_records=True):
         xyz.append(p)
@@ -301,9 +333,10 @@ def result_fields(result, normals=False, float_type="f8"):
 
 
 def _field_types(names, float_type):
-    """``[(name, dtype)]`` of the new dimensions: uint8 for ``valid`` and ``status``,
-    ``float_type`` else."""
-    return [(n, np.uint8 if n in _INTEGER_FIELDS else np.dtype(float_type)) for n in names]
+    """``[(name, dtype)]`` of the new dimensions: uint8 for ``valid`` and ``status`` (with or
+    without a radius suffix), ``float_type`` else."""
+    return [(n, np.uint8 if split_radius_suffix(n)[0] in _INTEGER_FIELDS
+             else np.dtype(float_type)) for n in names]
 
 
 def check_paths(in_path, out_path):
@@ -346,7 +379,8 @@ def annotate_las(in_path, out_path, fields_for, names, chunk_size=DEFAULT_CHUNK,
     if version != str(header.version):  # LAS 1.0: laspy writes 1.1 and later only
         header.version = laspy.header.Version.from_str(version)
     header.add_extra_dims([
-        laspy.ExtraBytesParams(name=n, type=t, description=_DESCRIPTIONS.get(n, ""))
+        laspy.ExtraBytesParams(name=n, type=t,
+                               description=_DESCRIPTIONS.get(split_radius_suffix(n)[0], ""))
         for n, t in _field_types(names, float_type)])
 
     def write(tmp):
@@ -366,22 +400,37 @@ def annotate_las(in_path, out_path, fields_for, names, chunk_size=DEFAULT_CHUNK,
 
 
 def write_las_curvature(in_path, out_path, result, normals=None, chunk_size=DEFAULT_CHUNK,
-                        float_type="f8"):
+                        float_type="f8", suffixes=None):
     """Copy ``in_path`` to ``out_path`` with the curvature fields of ``result`` (a row per point).
 
     Parameters
     ----------
     in_path, out_path : str, .las or .laz
-    result : CurvatureResult with one row per point of ``in_path``, in file order
-    normals : bool, write NormalX..NormalZ (default: when the input has no normals)
+    result : CurvatureResult with one row per point of ``in_path``, in file order; or a list
+        of them, one per radius, with ``suffixes``
+    normals : bool, write NormalX..NormalZ (default: when the input has no normals); the
+        first result's normals
+    suffixes : list of str, one per result of a list (``["_r0p5", "_r1"]``, see
+        :func:`meshcurv.io.data.radius_suffix`): each result's fields are named
+        ``<field><suffix>``
     """
     check_paths(in_path, out_path)
+    results = list(result) if suffixes is not None else [result]
+    suffixes = list(suffixes) if suffixes is not None else [""]
+    if len(suffixes) != len(results) or len(set(suffixes)) != len(suffixes):
+        raise ValueError(f"{len(results)} results need as many distinct suffixes, got "
+                         f"{suffixes!r}")
     total = las_point_count(in_path)
-    if len(result) != total:
-        raise ValueError(f"result has {len(result)} rows, {in_path} has {total} points")
-    names = check_annotatable(in_path, normals)
+    for res in results:
+        if len(res) != total:
+            raise ValueError(f"result has {len(res)} rows, {in_path} has {total} points")
+    names = check_annotatable(in_path, normals, suffixes=suffixes)
     normals = NORMAL_FIELDS[0] in names
-    fields = result_fields(result, normals=normals, float_type=float_type)
+    fields = {}
+    for i, (res, suffix) in enumerate(zip(results, suffixes)):
+        fields.update({k + suffix if k not in NORMAL_FIELDS else k: v for k, v in
+                       result_fields(res, normals=normals and i == 0,
+                                     float_type=float_type).items()})
     annotate_las(in_path, out_path, lambda a, k: {n: fields[n][a:a + k] for n in names}, names,
                  chunk_size=chunk_size, float_type=float_type)
 
@@ -402,7 +451,8 @@ def read_las(path):
 
     ``vertices`` are the scaled x, y, z ((n, 3) float64, model units); ``normals`` come from
     NormalX..NormalZ (or nx.., normal_x..) extra dimensions when the file has them; ``fields``
-    holds the :data:`CURVATURE_FIELDS` extra dimensions of an annotated file. Clouds larger
+    holds the :data:`CURVATURE_FIELDS` extra dimensions of an annotated file (also those of
+    each radius, ``k1_r0p5``, see :func:`write_las_curvature`). Clouds larger
     than memory go through :func:`meshcurv.tiled.annotate_tiled` instead.
     """
     require_laspy(path)
@@ -413,7 +463,7 @@ def read_las(path):
     return MeshData(vertices=xyz, normals=normals, fields=fields, path=path)
 
 
-def write_las(path, data, result, quality=None, colormap=None, clamp=None):
+def write_las(path, data, result, quality=None, colormap=None, clamp=None, suffixes=None):
     """Write the LAS/LAZ input of ``data`` with the curvature ``result`` to ``path`` (atomic).
 
     Every point record of the input is copied unchanged and the fields of
@@ -421,6 +471,8 @@ def write_las(path, data, result, quality=None, colormap=None, clamp=None):
     extra-bytes dimensions, plus NormalX..NormalZ when the input has no normals (see
     :func:`write_las_curvature`). ``.laz`` output is compressed. LAS has no colour ramp or
     quality property, so ``quality``, ``colormap`` and ``clamp`` are accepted and ignored.
+    ``result`` may be a list of results, one per radius, with ``suffixes`` (see
+    :func:`write_las_curvature`).
     """
     if not _is_las(data.path):
         raise MeshFileError(f"{path}: LAS/LAZ output adds fields to the points of a LAS/LAZ "
@@ -428,7 +480,7 @@ def write_las(path, data, result, quality=None, colormap=None, clamp=None):
     check_distinct(data.path, path)
     require_laspy(path)
     try:
-        write_las_curvature(data.path, path, result)
+        write_las_curvature(data.path, path, result, suffixes=suffixes)
     except LasReadError as exc:
         raise MeshFileError(first_line(exc)) from exc
 

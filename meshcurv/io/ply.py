@@ -12,6 +12,11 @@ full precision (by its file name, ``scalar_k1``); :func:`read_ply` drops the pre
 CloudCompare loads the ``scalar_`` fields in single precision; MeshLab and pymeshlab keep only
 normals, ``quality`` and colour (see :mod:`meshcurv.filters` for the fields in pymeshlab).
 
+A file annotated at several radii (:func:`write_annotated` with a list of results) holds every
+field from ``k1`` to ``residual`` once per radius, named with the radius's suffix
+(:func:`meshcurv.io.data.radius_suffix`: ``k1_r0p5`` at radius 0.5, ``k1_r2pct`` at 2 %, stored
+as ``scalar_k1_r0p5``), and the normals, ``quality`` and colour of the first radius.
+
 plyfile is imported when a file is read or written, not with this module.
 """
 
@@ -22,7 +27,7 @@ import numpy as np
 from .. import shape
 from ..result import CURVATURE_FIELDS, curvature_fields
 from .atomic import atomic_write, check_distinct
-from .data import MeshData, MeshFileError, file_extension
+from .data import MeshData, MeshFileError, file_extension, split_radius_suffix
 from .parse import triangulate
 
 __all__ = ["ANNOTATED_FIELDS", "PLY_PREFIX", "ply_property", "ply_field_names", "read_ply",
@@ -40,14 +45,24 @@ _COLOR = ("red", "green", "blue", "alpha")
 PLY_PREFIX = "scalar_"
 
 
+def _is_prefixed(field):
+    """Whether ``field`` is written ``scalar_<field>``: a field of :data:`ANNOTATED_FIELDS`
+    except ``quality``, with or without a radius suffix (``k1_r0p5``)."""
+    base = split_radius_suffix(field)[0]
+    return base in ANNOTATED_FIELDS and base != "quality"
+
+
 def ply_property(field):
     """PLY vertex property name of an annotated field: ``scalar_<field>`` for the fields of
-    :data:`ANNOTATED_FIELDS` except ``quality``; any other name unchanged.
+    :data:`ANNOTATED_FIELDS` except ``quality`` (also with a radius suffix, ``k1_r0p5``); any
+    other name unchanged.
 
-    >>> ply_property("k1"), ply_property("quality"), ply_property("intensity")
-    ('scalar_k1', 'quality', 'intensity')
+    >>> ply_property("k1"), ply_property("k1_r0p5"), ply_property("quality")
+    ('scalar_k1', 'scalar_k1_r0p5', 'quality')
+    >>> ply_property("intensity")
+    'intensity'
     """
-    return PLY_PREFIX + field if field in ANNOTATED_FIELDS and field != "quality" else field
+    return PLY_PREFIX + field if _is_prefixed(field) else field
 
 
 def ply_field_names(properties):
@@ -62,7 +77,7 @@ def ply_field_names(properties):
     out = {}
     for p in properties:
         field = p[len(PLY_PREFIX):] if p.startswith(PLY_PREFIX) else p
-        renamed = field != p and field in ANNOTATED_FIELDS and field != "quality"
+        renamed = field != p and _is_prefixed(field)
         out[p] = field if renamed and field not in properties else p
     return out
 
@@ -246,57 +261,89 @@ def write_ply(path, vertices, faces=None, fields=None):
     atomic_write(path, ply.write)
 
 
-def _annotated_fields(data, result, quality, colormap, clamp):
-    """The vertex properties of the annotated PLY besides ``x y z``, in file order, by field
-    name: the input's other fields, normals, curvature fields, counts, residual, quality and
-    colour (see the module docstring)."""
-    values = curvature_fields(result)
-    ours = (set(_GEOMETRY) | set(_COLOR) | set(ANNOTATED_FIELDS)
-            | {ply_property(f) for f in ANNOTATED_FIELDS})
-    fields = {k: v for k, v in data.fields.items() if k not in ours}
-    fields.update({"nx": result.normals[:, 0], "ny": result.normals[:, 1],
-                   "nz": result.normals[:, 2]})
-    fields.update(values)
+def _radius_fields(result):
+    """The fields of one radius, ``k1`` .. ``residual``, in file order, by field name."""
+    fields = curvature_fields(result)
     fields["n_neighbors"] = np.asarray(result.n_neighbors, dtype=np.int32)
     fields["n_samples"] = np.asarray(result.n_samples, dtype=np.int32)
     fields["residual"] = np.asarray(result.residual, dtype=np.float64)
-    fields["quality"] = np.where(result.valid, values[quality], 0.0)
-    rgb = shape.colorize(np.where(result.valid, values[quality], np.nan), quality, colormap, clamp)
+    return fields
+
+
+def _annotated_fields(data, results, suffixes, quality, colormap, clamp):
+    """The vertex properties of the annotated PLY besides ``x y z``, in file order, by field
+    name: the input's other fields, normals, the fields of each result of ``results`` named
+    with its suffix of ``suffixes``, then quality and colour (see the module docstring); the
+    normals, quality and colour are the first result's."""
+    first = results[0]
+    values = curvature_fields(first)
+    # an annotated input's curvature (at any radius) is replaced, never kept beside the new one
+    fields = {k: v for k, v in data.fields.items()
+              if k not in _GEOMETRY and k not in _COLOR and k != "quality"
+              and not _is_prefixed(ply_field_names([k])[k])}
+    fields.update({"nx": first.normals[:, 0], "ny": first.normals[:, 1],
+                   "nz": first.normals[:, 2]})
+    for result, suffix in zip(results, suffixes):
+        fields.update({k + suffix: v for k, v in _radius_fields(result).items()})
+    fields["quality"] = np.where(first.valid, values[quality], 0.0)
+    rgb = shape.colorize(np.where(first.valid, values[quality], np.nan), quality, colormap, clamp)
     for i, c in enumerate(("red", "green", "blue")):
         fields[c] = rgb[:, i]
     return fields
 
 
-def write_annotated(path, data, result, quality="mean", colormap="Turbo", clamp=2.0):
+def write_annotated(path, data, result, quality="mean", colormap="Turbo", clamp=2.0,
+                    suffixes=None):
     """Write ``data`` with the curvature ``result`` as an annotated binary PLY (atomic).
 
     Parameters
     ----------
     path : str, must end in .ply
     data : MeshData, the geometry the result was computed on
-    result : CurvatureResult, one row per vertex of ``data``
+    result : CurvatureResult, one row per vertex of ``data``; or a list of them, one per radius
+        (``principal_curvatures(..., radius=[r1, r2, ...])``), with ``suffixes``
     quality : str, default "mean"
         Field (one of :data:`meshcurv.shape.FIELDS`) copied into ``quality`` and used for the
         colour; invalid vertices get quality 0 and grey (the named fields keep NaN).
     colormap, clamp : colour ramp, see :func:`meshcurv.shape.colorize`
+    suffixes : list of str, one per result of a list, e.g. ``["_r0p5", "_r1"]``
+        (:func:`meshcurv.io.data.radius_suffix`): each result's fields are written as
+        ``<field><suffix>``; the normals, quality and colour are the first result's.
 
     The curvature fields are named ``scalar_<field>`` in the file (``scalar_k1``, see
     :func:`ply_property`), the name under which CloudCompare loads them as scalar fields;
-    :func:`read_ply` gives them back as ``fields["k1"]``. Other per-vertex properties of the
-    input PLY (``data.fields``) are kept unless an annotated field has the same name.
+    :func:`read_ply` gives them back as ``fields["k1"]`` (``fields["k1_r0p5"]``). Other
+    per-vertex properties of the input PLY (``data.fields``) are kept, except annotated fields
+    (with or without a radius suffix), which are replaced.
     """
     if file_extension(path) != ".ply":
         raise MeshFileError(f"{path}: annotated output must be a .ply file")
     if data.path:
         check_distinct(data.path, path)
+    results, suffixes = _results_and_suffixes(result, suffixes)
     n = len(data.vertices)
-    if len(result.k1) != n:
-        raise ValueError(f"result has {len(result.k1)} rows for {n} vertices")
+    for res in results:
+        if len(res.k1) != n:
+            raise ValueError(f"result has {len(res.k1)} rows for {n} vertices")
     if quality not in shape.FIELDS:
         raise ValueError(f"quality must be one of {', '.join(shape.FIELDS)}, got {quality!r}")
-    fields = _annotated_fields(data, result, quality, colormap, clamp)
+    fields = _annotated_fields(data, results, suffixes, quality, colormap, clamp)
     write_ply(path, data.vertices, None if data.is_point_cloud else data.faces,
               {ply_property(k): v for k, v in fields.items()})
+
+
+def _results_and_suffixes(result, suffixes):
+    """``(results, suffixes)`` as lists of the same length: ``([result], [""])`` for one
+    result; ValueError for a list without one distinct suffix per result."""
+    if suffixes is None:
+        if isinstance(result, (list, tuple)):
+            raise ValueError("a list of results needs one radius suffix per result")
+        return [result], [""]
+    results, suffixes = list(result), list(suffixes)
+    if not results or len(suffixes) != len(results) or len(set(suffixes)) != len(suffixes):
+        raise ValueError(f"{len(results)} results need as many distinct suffixes, got "
+                         f"{suffixes!r}")
+    return results, suffixes
 
 
 readers = {".ply": read_ply}

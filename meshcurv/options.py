@@ -15,7 +15,7 @@ __all__ = ["Options", "OPTION_NAMES", "CHOICES", "MAX_DIRECTIONS", "check_option
 # Research switches of the estimator: the fields of Options, in order.
 SWITCH_NAMES = ("slab", "min_points", "min_spread", "weighting", "circle_normalization",
                 "section_blend", "robust", "half_frequency", "normal_estimation",
-                "refine_normals", "orientation")
+                "refine_normals", "orientation", "sparse_retry")
 # Every option of principal_curvatures besides the data (vertices, faces, normals) and the
 # call's own arguments (options, query, progress): its three public knobs and the switches.
 OPTION_NAMES = ("radius", "n_directions", "neighborhood") + SWITCH_NAMES
@@ -133,6 +133,16 @@ class Options:
         Global orientation of estimated point-cloud normals: "mst" propagates along a minimum
         spanning tree and then turns each connected piece away from its own centroid; a (3,)
         point orients every normal towards it (a scanner position).
+    sparse_retry : bool, default True
+        Re-estimate, at twice and then four times ``radius``, the vertices whose ball holds
+        too few points: their fit failed for lack of points (no 5 usable half-sets, an
+        ill-posed or one-directional Euler fit), or the local cubic fit had no 11 points to
+        measure noise and refine the normal. Clumpy or gappy sampling and density falling
+        across a scan otherwise leave such vertices invalid, or estimated from a handful of
+        points with a PCA normal that may be tilted by 90 degrees (on clumpy clouds without
+        normals, below 11 neighbors: |dk| up to 20 / r). A larger ball is used only where its
+        fit succeeds and it holds at most a quarter of the points (a local patch, not the
+        other side of a small object); ``result.n_neighbors`` is then its count.
 
     Examples
     --------
@@ -155,6 +165,7 @@ class Options:
     normal_estimation: str = "auto"
     refine_normals: object = None
     orientation: object = "mst"
+    sparse_retry: bool = True
 
     def __post_init__(self):
         check_options(**self.as_dict())
@@ -192,6 +203,7 @@ class Plan(NamedTuple):
     of all points first, oriented along a spanning tree). ``refine``: quadric-refined normals.
     ``weighting``: as the option. ``fit``: the fused kernel's settings ``(n_directions, slab,
     min_points, min_spread, unit_norm, section_blend, half_frequency, robust)``, typed.
+    ``sparse_retry``: as the option.
     """
 
     use_kring: bool
@@ -200,13 +212,14 @@ class Plan(NamedTuple):
     refine: bool
     weighting: str
     fit: tuple
+    sparse_retry: bool = True
 
 
 def resolve_plan(has_faces, has_normals, n_directions=8, neighborhood="auto", slab=0.25,
                  min_points=3, min_spread=0.25, weighting="auto",
                  circle_normalization="tangent", section_blend=True, robust=True,
                  half_frequency=False, normal_estimation="auto", refine_normals=None,
-                 orientation="mst"):
+                 orientation="mst", sparse_retry=True):
     """The :class:`Plan` of a call with these options (the defaults of
     :func:`meshcurv.principal_curvatures`) on input with or without faces and given normals.
 
@@ -237,4 +250,5 @@ def resolve_plan(has_faces, has_normals, n_directions=8, neighborhood="auto", sl
            circle_normalization == "unit", bool(section_blend), bool(half_frequency),
            bool(robust))
     refine = not has_normals if refine_normals is None else bool(refine_normals)
-    return Plan(has_faces and neighborhood != "ball", normals, viewpoint, refine, weighting, fit)
+    return Plan(has_faces and neighborhood != "ball", normals, viewpoint, refine, weighting, fit,
+                bool(sparse_retry))

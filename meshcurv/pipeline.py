@@ -379,9 +379,13 @@ def retry_sparse(out, v, f, nv, face_normals, radius, query, plan, search):
     finite = np.flatnonzero(np.isfinite(v).all(axis=1))
     most = MAX_BALL_FRACTION * len(finite)
     sparse = plan._replace(fit=plan.fit[:2] + (float(SPARSE_MIN_POINTS),) + plan.fit[3:])
-    wide = {factor: kring_search(v, f, radius * factor) if plan.use_kring else
-            ball_search(v, finite, radius * factor) for factor in SPARSE_FACTORS}
-    wide[1.0] = search
+    wide = {1.0: search}       # the searches of the larger radii, made when first needed
+
+    def search_at(factor):
+        if factor not in wide:
+            r = radius * factor
+            wide[factor] = kring_search(v, f, r) if plan.use_kring else ball_search(v, finite, r)
+        return wide[factor]
     passes = [(factor, plan) for factor in SPARSE_FACTORS]
     if plan.fit[2] > SPARSE_MIN_POINTS:
         passes += [(factor, sparse) for factor in (1.0,) + SPARSE_FACTORS]
@@ -394,11 +398,13 @@ def retry_sparse(out, v, f, nv, face_normals, radius, query, plan, search):
     for factor, how in passes:
         rows = rows[(out.status[rows] != Status.OK) |
                     (~np.isfinite(out.noise[rows]) & (how is plan))]
-        local = rows[wide[factor].counts(query[rows]) <= most] if factor > 1.0 else rows
+        if not len(rows):
+            break
+        local = rows[search_at(factor).counts(query[rows]) <= most] if factor > 1.0 else rows
         if not len(local):
             continue
         sub = _refit(v, query[local], reference if reference is not None else nv,
-                     face_normals, radius * factor, wide[factor], how,
+                     face_normals, radius * factor, search_at(factor), how,
                      how is sparse and factor == 1.0, trusted)
         done = (sub.status == Status.OK) & ((sub.n_neighbors <= most) | (factor == 1.0))
         if how is sparse and not plan.use_kring:

@@ -134,15 +134,19 @@ class Options:
         spanning tree and then turns each connected piece away from its own centroid; a (3,)
         point orients every normal towards it (a scanner position).
     sparse_retry : bool, default True
-        Re-estimate, at twice and then four times ``radius``, the vertices whose ball holds
-        too few points: their fit failed for lack of points (no 5 usable half-sets, an
-        ill-posed or one-directional Euler fit), or the local cubic fit had no 11 points to
-        measure noise and refine the normal. Clumpy or gappy sampling and density falling
-        across a scan otherwise leave such vertices invalid, or estimated from a handful of
-        points with a PCA normal that may be tilted by 90 degrees (on clumpy clouds without
-        normals, below 11 neighbors: |dk| up to 20 / r). A larger ball is used only where its
-        fit succeeds and it holds at most a quarter of the points (a local patch, not the
-        other side of a small object); ``result.n_neighbors`` is then its count.
+        Re-estimate the vertices whose ball holds too few points - their fit failed for lack
+        of points (no 5 usable half-sets, an ill-posed or one-directional Euler fit, no plane
+        fit), or the local cubic fit had no 11 points to measure noise and refine the normal -
+        at 1.5, 2, 3 and 4 times ``radius``, each at the smallest that serves while its ball
+        holds at most a quarter of the points (a local patch, not the other side of a small
+        object); where none does, with half-sets of a single point (a coarse mesh's 1-ring).
+        Clumpy or gappy sampling and density falling across a scan otherwise leave such
+        vertices invalid, or estimated from a handful of points with a PCA normal a clump can
+        tilt (clumpy unit-sphere clouds without normals: |dk| up to 9). On clouds with
+        estimated normals an estimate from fewer than 11 points that no larger ball replaces
+        is dropped (``TOO_FEW_NEIGHBORS``). ``result.n_neighbors`` is the count of the ball
+        used; ``result.radius`` stays the call's. False: every vertex at ``radius`` alone
+        (tiled runs, whose halo covers that radius only).
 
     Examples
     --------

@@ -13,8 +13,9 @@ from scipy.spatial import cKDTree
 from tqdm.auto import tqdm
 
 from .fit import fused, jet
-from .neighbors import (MAX_BALL_FRACTION, BallGrid, KringWork, ball_counts, ball_grid, ball_neighbors,
-                        edge_adjacency, kring_counts, kring_neighbors, spatial_order)
+from .neighbors import (MAX_BALL_FRACTION, BallGrid, KringWork, ball_counts, ball_grid,
+                        ball_neighbors, edge_adjacency, kring_counts, kring_neighbors,
+                        spatial_order)
 from .normals import face_vertex_normals, orient, orient_like, orient_mst, orient_towards, \
     pca_normals
 from .result import CurvatureResult, Status

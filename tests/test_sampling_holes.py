@@ -57,8 +57,8 @@ def clumpy_torus(seed, n=8000, major=2.0, minor=0.5):
     p = np.c_[ring * np.cos(u), ring * np.sin(u), minor * np.sin(v)]
     nrm = np.c_[np.cos(v) * np.cos(u), np.cos(v) * np.sin(u), np.sin(v)]
     keep = _clumpy(p / major, n, rng)
-    v = v[keep]
-    return p[keep], nrm[keep], np.full(len(keep), 1 / minor), np.cos(v) / (major + minor * np.cos(v))
+    k2 = np.cos(v[keep]) / (major + minor * np.cos(v[keep]))
+    return p[keep], nrm[keep], np.full(len(keep), 1 / minor), k2
 
 
 def falling_density_cap(seed, n=10000, ratio=25.0):

@@ -114,7 +114,7 @@ def _resolve_radius(radius, v, f, given_normals, settings):
     n_finite = int(finite_rows.sum())
     if radius is None or isinstance(radius, str):
         if radius is None:
-            radius = float(default_radius(v))
+            radius = float(default_radius(v, faces=f))
         elif radius == "auto":
             # pilot runs with this call's options; min_points is auto_radius' own smallest ball
             pilot = {k: val for k, val in settings.items() if k != "min_points"}

@@ -223,7 +223,7 @@ def auto_radius(vertices, faces=None, normals=None, *, weighting="none", min_poi
                       if finite.sum() >= 24 else (np.nan, np.nan))
     if not (np.isfinite(density) and density > 0 and np.isfinite(sigma)):
         # too few (distinct) points for the noise estimate: the sampling-only default
-        radius = default_radius(v)
+        radius = default_radius(v, faces=faces)
         return (radius, dict(density=np.nan, sigma=np.nan, kappa=np.nan, beta=np.nan,
                              r_min=radius, r_max=radius, probes=())) if details else radius
     with np.errstate(over="ignore", invalid="ignore"):        # far points: inf

@@ -16,7 +16,7 @@ __all__ = ["Options", "OPTION_NAMES", "CHOICES", "ORIENTATIONS", "MAX_DIRECTIONS
 SWITCH_NAMES = ("slab", "min_points", "min_spread", "weighting", "circle_normalization",
                 "section_blend", "robust", "half_frequency", "bias_correction",
                 "normal_estimation", "refine_normals", "orientation", "normal_fit",
-                "normal_constraints", "robust_points")
+                "normal_constraints", "robust_points", "sparse_retry")
 # Every option of principal_curvatures besides the data (vertices, faces, normals) and the
 # call's own arguments (options, query, progress): its three public knobs and the switches.
 OPTION_NAMES = ("radius", "n_directions", "neighborhood") + SWITCH_NAMES
@@ -200,6 +200,20 @@ class Options:
         With 2 % of a noisy sphere's vertices pushed 1-4 % of the diagonal off it, the good
         vertices off by more than 10 % drop from 45 % to none; on clean surfaces every weight
         is 1 (results unchanged). Costs one more pass over the points.
+    sparse_retry : bool, default True
+        Re-estimate the vertices whose ball holds too few points - their fit failed for lack
+        of points (no 5 usable half-sets, an ill-posed or one-directional Euler fit, no plane
+        fit), or the local cubic fit had no 11 points to measure noise and refine the normal -
+        at 1.5, 2, 3 and 4 times ``radius``, each at the smallest that serves while its ball
+        holds at most a quarter of the points (a local patch, not the other side of a small
+        object); where none does, with half-sets of a single point (a coarse mesh's 1-ring).
+        Clumpy or gappy sampling and density falling across a scan otherwise leave such
+        vertices invalid, or estimated from a handful of points with a PCA normal a clump can
+        tilt (clumpy unit-sphere clouds without normals: |dk| up to 9). On clouds with
+        estimated normals an estimate from fewer than 11 points that no larger ball replaces
+        is dropped (``TOO_FEW_NEIGHBORS``). ``result.n_neighbors`` is the count of the ball
+        used; ``result.radius`` stays the call's. False: every vertex at ``radius`` alone
+        (tiled runs, whose halo covers that radius only).
 
     Examples
     --------
@@ -226,6 +240,7 @@ class Options:
     normal_fit: str = "auto"
     normal_constraints: str = "auto"
     robust_points: bool = True
+    sparse_retry: bool = True
 
     def __post_init__(self):
         check_options(**self.as_dict())
@@ -268,6 +283,7 @@ class Plan(NamedTuple):
     min_points, min_spread, unit_norm, section_blend, half_frequency, robust)``, typed.
     ``normal_constraints``: normal-aware circle fits where a normal field exists.
     ``robust_points``: the point-outlier pass and its weights.
+    ``sparse_retry``: as the option.
     """
 
     use_kring: bool
@@ -281,6 +297,7 @@ class Plan(NamedTuple):
     check_given: bool = False
     normal_constraints: bool = False
     robust_points: bool = True
+    sparse_retry: bool = True
 
 
 def resolve_plan(has_faces, has_normals, n_directions=8, neighborhood="auto", slab=0.25,
@@ -288,7 +305,7 @@ def resolve_plan(has_faces, has_normals, n_directions=8, neighborhood="auto", sl
                  circle_normalization="tangent", section_blend=True, robust=True,
                  half_frequency=False, bias_correction=True, normal_estimation="auto",
                  refine_normals=None, orientation="mst", normal_fit="auto",
-                 normal_constraints="auto", robust_points=True):
+                 normal_constraints="auto", robust_points=True, sparse_retry=True):
     """The :class:`Plan` of a call with these options (the defaults of
     :func:`meshcurv.principal_curvatures`) on input with or without faces and given normals.
 
@@ -328,4 +345,5 @@ def resolve_plan(has_faces, has_normals, n_directions=8, neighborhood="auto", sl
     refine = not has_normals if refine_normals is None or auto else bool(refine_normals)
     return Plan(has_faces and neighborhood != "ball", normals, viewpoint, refine, weighting,
                 bool(bias_correction), fit, normal_fit, has_normals and auto,
-                normal_constraints == "auto", bool(robust_points))
+                normal_constraints == "auto", bool(robust_points),
+                bool(sparse_retry))

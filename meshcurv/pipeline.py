@@ -15,16 +15,18 @@ from tqdm.auto import tqdm
 from .fit import fused, jet, outliers
 from .fit.constants import TUKEY_C
 from .fit.extrapolate import BIAS_RATIO, extrapolate_to_zero
-from .neighbors import (BallGrid, KringWork, ball_counts, ball_grid, ball_neighbors,
-                        edge_adjacency, kring_counts, kring_neighbors, spatial_order)
+from .neighbors import (MAX_BALL_FRACTION, BallGrid, KringWork, ball_counts, ball_grid,
+                        ball_neighbors, edge_adjacency, kring_counts, kring_neighbors,
+                        spatial_order)
 from .normals import face_vertex_normals, orient, orient_along, orient_like, orient_mst, \
     orient_towards, pca_normals, sphere_normals
 from .result import CurvatureResult, Status
 
 __all__ = ["run", "run_radii", "estimate_normals", "weight_blend", "clean_fraction",
            "given_normal_noise", "mix_given_normals", "Search", "ball_search", "kring_search",
-           "block_size", "blocks", "mst_normals", "outlier_scores", "BLOCK", "BLOCK_ENTRIES",
-           "MAX_PAIRS", "NOISE_SCALE", "BIAS_NOISE_SCALE", "GIVEN_SAMPLE"]
+           "block_size", "blocks", "mst_normals", "outlier_scores", "retry_sparse", "BLOCK",
+           "BLOCK_ENTRIES", "MAX_PAIRS", "NOISE_SCALE", "BIAS_NOISE_SCALE", "GIVEN_SAMPLE",
+           "SPARSE_FACTORS", "MAX_BALL_FRACTION"]
 
 # Query points per call into the kernels: bounds the memory of the neighbor lists (about
 # 0.8 kB per query point at 100 neighbors) at no measurable cost in speed.
@@ -56,6 +58,17 @@ BIAS_NOISE_SCALE = 2.5e-4
 # Vertices sampled to estimate the noise of given normals (:func:`given_normal_noise`): its
 # standard error is then about 2 % of the estimate.
 GIVEN_SAMPLE = 4096
+
+# Radii, as multiples of the call's, at which :func:`retry_sparse` re-estimates the vertices
+# whose ball held too few points, each at the smallest that serves (the larger the ball, the
+# more the curvature varies inside it): up to 16 times the area, so a patch sampled 16 times
+# more sparsely than the default radius' target still gets its ~100 points.
+SPARSE_FACTORS = (1.5, 2.0, 3.0, 4.0)
+# Fewest neighbors of a half-set in the last resort of :func:`retry_sparse`.
+SPARSE_MIN_POINTS = 1
+# Statuses of fits that failed for lack of points.
+SPARSE_STATUSES = (Status.TOO_FEW_NEIGHBORS, Status.TOO_FEW_HALF_SETS, Status.ILL_POSED_FIT,
+                   Status.DEGENERATE_DIRECTIONS)
 
 # Neighbors per point in the graph of the spanning-tree orientation.
 _TREE_NEIGHBORS = 10
@@ -575,7 +588,7 @@ def run_radii(v, f, given_normals, radii, query, plan, progress=False):
     outs = [_Outputs(len(query)) for _ in radii]
     given_a2 = [given_normal_noise(v, start[0], r, s, query) if plan.check_given else 0.0
                 for s, r, start in zip(searches, radii, starts)]
-    fields = []
+    fields, before_fields = [], list(starts)
     for i, (s, r) in enumerate(zip(searches, radii)):
         nv, face_normals, note = starts[i]
         if plan.normal_constraints and nv is None:
@@ -596,6 +609,10 @@ def run_radii(v, f, given_normals, radii, query, plan, progress=False):
             _fit_block(out, pos, xb, qb, indptr, indices, r, search, plan, a2, field, w)
             del indptr, indices
         del lists
+    # retried rows get normals of their own, wider balls (not the field of this radius)
+    for out, search, r, (nv, face_normals, _) in zip(outs, searches, radii, before_fields):
+        if plan.sparse_retry:
+            retry_sparse(out, v, f, nv, face_normals, r, query, plan, search)
     for out, score in zip(outs, scores):
         if score is not None:
             out.outlier_score[:] = score[query]
@@ -604,3 +621,122 @@ def run_radii(v, f, given_normals, radii, query, plan, progress=False):
     for res, (_, _, note) in zip(results, starts):
         res.orientation = note
     return results
+
+
+def _needs_support(out, plan):
+    """Rows of ``out`` estimated from too few points: fits that failed for lack of them (and,
+    for estimated normals, plane fits that had no 3 points), and estimates whose local cubic
+    fit had no 11 points (noise NaN: no noise measured, normal not refined)."""
+    lacking = np.isin(out.status, SPARSE_STATUSES)
+    if plan.normals != "given":
+        lacking |= out.status == Status.NO_NORMAL
+    thin = (out.status == Status.OK) & ~np.isfinite(out.noise)
+    return np.flatnonzero(lacking | thin)
+
+
+def _reference_normals(nv, trusted, rank, indptr, indices):
+    """A sign reference per neighbor list: the sum of the normals ``nv`` (vertex order) of its
+    ``trusted`` vertices ((n,) bool, finite normals), zero where it has none (``rank`` maps
+    list entries to vertices, None if they are vertices)."""
+    rows = indices if rank is None else rank[indices]
+    nb = np.where(trusted[rows, None], nv[rows], 0.0)
+    owner = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
+    ref = np.zeros((len(indptr) - 1, 3))
+    np.add.at(ref, owner, nb)
+    return ref
+
+
+def _refit(v, idx, nv, face_normals, r, search, plan, own_normals, trusted=None):
+    """:class:`_Outputs` of the vertices ``idx`` at radius ``r`` over ``search``. Normals: the
+    given or face ones (``nv``); else plane fits over the ball of ``r``, oriented like the
+    faces, the viewpoint or, for spanning-tree normals (``own_normals`` False), the
+    spanning-tree normals ``nv`` of the ``trusted`` vertices in the ball (see
+    :func:`_reference_normals`; none where the ball holds none of them)."""
+    sub = _Outputs(len(idx))
+    for pos in blocks(len(idx), False, "", block_size(search, idx, r, "points")):
+        xb = v[idx[pos]]
+        indptr, indices = search.neighbors(idx[pos])
+        if plan.normals == "mst" and not own_normals:
+            qb = pca_normals(search.points, xb, indptr, indices, r)
+            ref = _reference_normals(nv, trusted, search.rank, indptr, indices)
+            orient_like(qb, ref)
+            qb[~np.any(ref != 0.0, axis=1)] = np.nan     # no side to take: no normal
+            with np.errstate(invalid="ignore", divide="ignore"):
+                qb /= np.linalg.norm(qb, axis=1, keepdims=True)
+        else:
+            qb = _block_normals(nv, face_normals, idx[pos], xb, indptr, indices, r, search,
+                                plan)
+        _fit_block(sub, pos, xb, qb, indptr, indices, r, search, plan)
+    return sub
+
+
+def _take(out, rows, sub, done):
+    """Copy the rows ``done`` of ``sub`` into rows ``rows[done]`` of ``out``."""
+    for name in ("k1", "k2", "d1", "d2", "normals", "n_samples", "residual", "noise",
+                 "n_neighbors", "status"):
+        getattr(out, name)[rows[done]] = getattr(sub, name)[done]
+
+
+def retry_sparse(out, v, f, nv, face_normals, radius, query, plan, search):
+    """Re-estimate, in place, the rows of ``out`` that had too few points (:func:`_needs_support`).
+
+    First at ``SPARSE_FACTORS`` times ``radius``, each row at the first factor whose fit
+    succeeds with a ball of at most ``MAX_BALL_FRACTION`` of the finite points. The fits that
+    still fail then at ``radius`` and at those factors again with half-sets of
+    ``SPARSE_MIN_POINTS`` point: a coarse ring (a low-poly mesh's 1-ring) puts one or two points
+    in each half-set, and the circle through x and one point p centred on the normal line is
+    the classic ``2 h / |p - x|^2`` estimate of the normal curvature towards p (exact on
+    spheres), 5 or more of them averaged by the Euler fit. ``search`` is the search of
+    ``radius``. Rows nothing serves keep their estimate, except on clouds with estimated
+    normals, where an estimate from fewer than 11 points has no checked normal and is dropped.
+    """
+    rows = _needs_support(out, plan)
+    if not len(rows):
+        return
+    finite = np.flatnonzero(np.isfinite(v).all(axis=1))
+    most = MAX_BALL_FRACTION * len(finite)
+    sparse = plan._replace(fit=plan.fit[:2] + (float(SPARSE_MIN_POINTS),) + plan.fit[3:])
+    wide = {1.0: search}       # the searches of the larger radii, made when first needed
+
+    def search_at(factor):
+        if factor not in wide:
+            r = radius * factor
+            wide[factor] = kring_search(v, f, r) if plan.use_kring else ball_search(v, finite, r)
+        return wide[factor]
+    passes = [(factor, plan) for factor in SPARSE_FACTORS]
+    if plan.fit[2] > SPARSE_MIN_POINTS:
+        passes += [(factor, sparse) for factor in (1.0,) + SPARSE_FACTORS]
+    # sign references of the spanning-tree normals: points with 11 neighbors (a sparse clump's
+    # tree may be a piece of its own, turned away from its own centroid), and those oriented
+    # by a pass
+    trusted = np.zeros(len(v), dtype=bool)
+    trusted[query] = np.isfinite(out.noise) & np.isfinite(out.normals).all(axis=1)
+    reference = nv.copy() if plan.normals == "mst" else None
+    for factor, how in passes:
+        rows = rows[(out.status[rows] != Status.OK) |
+                    (~np.isfinite(out.noise[rows]) & (how is plan))]
+        if not len(rows):
+            break
+        local = rows[search_at(factor).counts(query[rows]) <= most] if factor > 1.0 else rows
+        if not len(local):
+            continue
+        sub = _refit(v, query[local], reference if reference is not None else nv,
+                     face_normals, radius * factor, search_at(factor), how,
+                     how is sparse and factor == 1.0, trusted)
+        done = (sub.status == Status.OK) & ((sub.n_neighbors <= most) | (factor == 1.0))
+        if how is sparse and not plan.use_kring:
+            # one-point half-sets of a cloud only where the cubic fit checked the normal; a
+            # mesh's rings are its own neighborhoods (an icosahedron's 1-ring: 5 points)
+            done &= np.isfinite(sub.noise)
+        _take(out, local, sub, done)
+        if reference is not None:
+            oriented = done & np.isfinite(sub.noise)
+            trusted[query[local[oriented]]] = True
+            reference[query[local[oriented]]] = sub.normals[oriented]
+    if plan.normals in ("mst", "pca") and not plan.use_kring:
+        # a plane fit through fewer than 11 points of a clumpy cloud may be tilted by 90
+        # degrees, and no larger ball served: no estimate
+        thin = (out.status == Status.OK) & ~np.isfinite(out.noise)
+        for name in ("k1", "k2", "d1", "d2", "residual"):
+            getattr(out, name)[thin] = np.nan
+        out.status[thin] = Status.TOO_FEW_NEIGHBORS

@@ -25,7 +25,8 @@ class Status(IntEnum):
     - ``NO_NORMAL`` (2): its normal is zero, NaN or infinite (e.g. fewer than 3 points for a
       plane fit, a vertex in no face).
     - ``TOO_FEW_NEIGHBORS`` (3): fewer than ``min_points`` neighbors within the radius: no
-      half-set can be fitted (an isolated point, a radius below the spacing).
+      half-set can be fitted (an isolated point, a radius below the spacing); or, on a cloud
+      with estimated normals, fewer than 11 within every radius tried (``sparse_retry``).
     - ``TOO_FEW_HALF_SETS`` (4): fewer than 5 half-sets with enough points reaching far enough,
       or fewer than 3 planes with one (borders, holes, one-sided neighborhoods).
     - ``ILL_POSED_FIT`` (5): the Euler model's least-squares system is singular, or too few

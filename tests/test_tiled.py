@@ -18,6 +18,12 @@ FIELDS = ("k1", "k2", "d1", "d2", "normals", "valid", "n_neighbors", "n_samples"
           "noise", "status")
 
 
+def untiled_run(*args, **kwargs):
+    """The untiled estimate a tiled run reproduces: at the one radius its halo covers (tiles
+    do not retry sparse points at larger radii)."""
+    return meshcurv.principal_curvatures(*args, sparse_retry=False, **kwargs)
+
+
 def on(client):
     """Run on the shared cluster, one numba thread per task (two workers on two cores)."""
     return {"scheduler": client, "threads_per_task": 1}
@@ -98,7 +104,7 @@ def default_run(client):
     tiled, report = principal_curvatures_tiled(pts, radius, TILE, orientation=viewpoint,
                                                chunk_size=25_000, measure_memory=True,
                                                return_report=True, **on(client))
-    untiled = meshcurv.principal_curvatures(pts, radius=radius, orientation=viewpoint)
+    untiled = untiled_run(pts, radius=radius, orientation=viewpoint)
     return pts, radius, tiled, untiled, report
 
 
@@ -143,7 +149,7 @@ def test_mst_orientation_agrees_across_tiles_and_with_the_untiled_run(client):
     radius = radius_for(30, 24_000 / 155.0**2)
     tiled, report = principal_curvatures_tiled(pts, radius, 38.76, orientation="mst",
                                                return_report=True, **on(client))
-    untiled = meshcurv.principal_curvatures(pts, radius=radius, orientation="mst")
+    untiled = untiled_run(pts, radius=radius, orientation="mst")
     assert report.n_tiles == 16
     # each tile's own pieces are open and already turned towards +z: the votes agree with them
     assert set(report.flips.values()) == {1}
@@ -160,7 +166,7 @@ def test_given_normals_are_used_as_they_are(client):
     radius = radius_for(30, 12_000 / 150.0**2)
     normals = np.tile([0.0, 0.0, 1.0], (len(pts), 1))
     tiled = principal_curvatures_tiled(pts, radius, 40.0, normals=normals, **on(client))
-    untiled = meshcurv.principal_curvatures(pts, normals=normals, radius=radius)
+    untiled = untiled_run(pts, normals=normals, radius=radius)
     assert_same_result(tiled, untiled, atol=1e-12)
 
 
@@ -192,7 +198,7 @@ def test_two_million_points_in_16_tiles_equal_the_untiled_run_at_every_tile_bord
     rows = np.union1d(np.flatnonzero(~(to_border > 2 * radius)),  # NaN rows included
                       rng.choice(N_BIG, 50_000, replace=False))
     assert len(rows) > 60_000
-    untiled = meshcurv.principal_curvatures(pts, radius=radius, orientation=viewpoint,
+    untiled = untiled_run(pts, radius=radius, orientation=viewpoint,
                                             query=rows)
     sample = type(untiled)(radius=tiled.radius,
                            **{k: np.asarray(getattr(tiled, k))[rows] for k in FIELDS})
@@ -205,7 +211,7 @@ def test_two_million_points_in_16_tiles_equal_the_untiled_run_everywhere():
     tiled, report = principal_curvatures_tiled(pts, radius, SIDE_BIG / 4 * 1.0001, n_workers=2,
                                                orientation=viewpoint, return_report=True)
     assert report.n_tiles == 16
-    untiled = meshcurv.principal_curvatures(pts, radius=radius, orientation=viewpoint)
+    untiled = untiled_run(pts, radius=radius, orientation=viewpoint)
     assert_same_result(tiled, untiled, atol=1e-12)
 
 
@@ -226,7 +232,7 @@ def test_annotate_laz_in_tiles_equals_untiled_and_keeps_input_dims(client, laz_i
     report = annotate_tiled(path, out, radius, 30.0, orientation=viewpoint, chunk_size=4000,
                             progress=False, **on(client))
     assert report.n_tiles == 16 and len(report.computed) == 16
-    untiled = meshcurv.principal_curvatures(xyz, radius=radius, orientation=viewpoint)
+    untiled = untiled_run(xyz, radius=radius, orientation=viewpoint)
     got, src = laspy.read(out), laspy.read(path)
     # float64 fields written and read back as they are
     np.testing.assert_array_equal(np.asarray(got["k1"]), untiled.k1)
@@ -256,7 +262,7 @@ def test_normals_in_the_file_are_used_and_not_written_again(client, tmp_path):
     annotate_tiled(path, out, radius, 20.0, chunk_size=3000, progress=False, **on(client))
     got = laspy.read(out)
     assert "NormalX" not in got.point_format.extra_dimension_names
-    untiled = meshcurv.principal_curvatures(xyz, normals=normals, radius=radius)
+    untiled = untiled_run(xyz, normals=normals, radius=radius)
     np.testing.assert_array_equal(np.asarray(got["k1"]), untiled.k1)
     np.testing.assert_array_equal(np.asarray(got["d1x"]), untiled.d1[:, 0])
 

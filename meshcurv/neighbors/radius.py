@@ -4,7 +4,17 @@ lengths of any size representable in float64."""
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ["default_radius", "power_of_two_scale", "typical_extent"]
+__all__ = ["default_radius", "power_of_two_scale", "typical_extent", "MAX_BALL_FRACTION"]
+
+# Largest share of the points a ball may hold and still be a local patch: on a sphere a ball
+# holding a quarter of the points spans a 60 degree cap (curvature x radius = 1); the default
+# radius of a cloud of 42 points reached across the whole object (a 42-vertex icosphere's
+# ball held all 41 other vertices: k1 from 0 to 2.6 where 1 is right).
+MAX_BALL_FRACTION = 0.25
+# A mesh's default radius reaches at least this multiple of the median over vertices of their
+# longest edge: the 1-ring is inside (a 12-vertex icosahedron: the 1-ring at 1.05, the next
+# vertices at 1.70 on the unit sphere).
+RING_MARGIN = 1.25
 
 # Lengths outside [2**-200, 2**200] are computed on coordinates scaled by a power of two
 # (exact): their squares would overflow or lose precision in float64.
@@ -35,7 +45,7 @@ def typical_extent(points, sample=20000, seed=0):
         return float(np.median(np.abs(p - np.median(p, axis=0)).max(axis=1)))
 
 
-def default_radius(points, target_neighbors=100, sample=20000, seed=0):
+def default_radius(points, target_neighbors=100, sample=20000, seed=0, faces=None):
     """Radius (model units) whose ball holds about ``target_neighbors`` points of the sampling.
 
     The local area density is estimated from the distance d16 to the 16th nearest neighbor,
@@ -43,11 +53,15 @@ def default_radius(points, target_neighbors=100, sample=20000, seed=0):
     ``sqrt(target / (pi rho))`` with the median of d16^2. For a regular grid of spacing h this
     is about 5.6 h; for a mesh about 5 mean edge lengths. A few far-away points do not move it
     (a median); duplicated points count once where most points are duplicates; clouds of any
-    scale (1e-300 ... 1e300) are measured on coordinates scaled by a power of two.
+    scale (1e-300 ... 1e300) are measured on coordinates scaled by a power of two. Small inputs
+    get balls of at most ``MAX_BALL_FRACTION`` of their points (fewer than 400 points: the
+    target is a quarter of them, and the density comes from that many neighbors), and a mesh's
+    radius reaches its 1-ring (``RING_MARGIN`` times the median longest edge of a vertex).
 
     Parameters
     ----------
     points : (n, 3) float, NaN rows ignored
+    faces : (m, 3) int, optional, the mesh's triangles (valid indices into ``points``)
 
     Returns
     -------
@@ -61,17 +75,38 @@ def default_radius(points, target_neighbors=100, sample=20000, seed=0):
     if s != 1.0:
         with np.errstate(over="ignore"):
             scaled = p * s
-        return default_radius(scaled, target_neighbors, sample, seed) / s
-    radius = _default_radius(p, target_neighbors, sample, seed)
+        radius = default_radius(scaled, target_neighbors, sample, seed) / s
+    else:
+        radius = _default_radius(p, target_neighbors, sample, seed)
     if not np.isfinite(radius):
         # most points duplicated (coincident points are nobody's neighbor): distinct ones
         p = np.unique(p, axis=0)
         radius = _default_radius(p, target_neighbors, sample, seed) if len(p) > 1 else radius
+    if faces is not None and len(faces) and np.isfinite(radius):
+        radius = max(radius, RING_MARGIN * _ring_reach(points, faces, s))
     return radius
 
 
+def _ring_reach(points, faces, scale):
+    """Median over the vertices of ``faces`` of their longest edge (model units; edges of NaN
+    vertices left out; lengths measured on coordinates times the power of two ``scale``)."""
+    v = np.asarray(points, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    a = np.concatenate([f[:, 0], f[:, 1], f[:, 2]])
+    b = np.concatenate([f[:, 1], f[:, 2], f[:, 0]])
+    with np.errstate(over="ignore", invalid="ignore"):
+        length = np.linalg.norm(v[a] * scale - v[b] * scale, axis=1) / scale
+    keep = np.isfinite(length)
+    longest = np.zeros(len(points))
+    np.maximum.at(longest, a[keep], length[keep])
+    np.maximum.at(longest, b[keep], length[keep])
+    used = longest[np.unique(np.concatenate([a[keep], b[keep]]))]
+    return float(np.median(used)) if len(used) else 0.0
+
+
 def _default_radius(p, target_neighbors, sample, seed):
-    k = min(16, len(p) - 1)
+    target_neighbors = min(target_neighbors, MAX_BALL_FRACTION * len(p))
+    k = max(1, min(16, len(p) - 1, int(target_neighbors)))
     rng = np.random.default_rng(seed)
     probe = p if len(p) <= sample else p[rng.choice(len(p), sample, replace=False)]
     d, _ = cKDTree(p).query(probe, k=k + 1, workers=-1)

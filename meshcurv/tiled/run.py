@@ -397,6 +397,9 @@ def _check_estimator_options(orientation, options):
         raise ValueError("tiled runs are for point clouds: neighborhood must be 'ball'")
     if options.get("normal_estimation", "pca") not in ("auto", "pca"):
         raise ValueError("tiled runs are for point clouds: normal_estimation must be 'pca'")
+    if options.get("sparse_retry", False):
+        raise ValueError("tiled runs estimate at the one radius their halo covers: "
+                         "sparse_retry must be False")
     return orientation if isinstance(orientation, str) else tuple(map(float, orientation))
 
 

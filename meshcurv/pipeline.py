@@ -332,8 +332,10 @@ def run(v, f, given_normals, radius, query, plan, progress=False):
                                progress, block)
         weight = outliers.outlier_weight(score)
         point_weights = weight if search.rank is None else weight[search.rank]
+    # the spanning tree's normals unweighted: they are estimate_normals', which tiled runs
+    # share between tiles (the weighted local jet refines them)
     nv, face_normals = _start_normals(v, f, given_normals, radius, search, finite, plan,
-                                      progress, point_weights)
+                                      progress)
     out = _Outputs(len(query))
     # queries by grid cell for ball queries (the points a block touches then stay in cache);
     # as given for k-rings, whose memory accesses follow the mesh's own numbering

@@ -22,8 +22,9 @@ class TileGrid:
     halo: float
 
     @classmethod
-    def for_radius(cls, origin, tile_size, radius):
-        """Grid whose halo covers ``radius`` with a margin against rounding.
+    def for_radius(cls, origin, tile_size, radius, reach=1.0):
+        """Grid whose halo covers ``reach * radius`` with a margin against rounding (reach 2:
+        the outlier scores of a tile point's neighbors need their own balls).
 
         Raises ValueError for tiles narrower than the radius: their work would be mostly halo,
         and every point would belong to many tiles.
@@ -31,7 +32,7 @@ class TileGrid:
         if not tile_size >= radius:
             raise ValueError(f"tile_size ({tile_size}) must be at least the radius ({radius})")
         # the absolute term covers the rounding of (x - origin) / tile_size, ~1e-16 tile sizes
-        halo = radius * (1 + _HALO_MARGIN) + 1e-9 * tile_size
+        halo = reach * radius * (1 + _HALO_MARGIN) + 1e-9 * tile_size
         return cls(origin=(float(origin[0]), float(origin[1])), tile_size=float(tile_size),
                    halo=float(halo))
 

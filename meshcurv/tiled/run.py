@@ -220,7 +220,7 @@ def annotate_tiled(in_path, out_path, radius=None, tile_size=None, *, orientatio
     if tile_size is None:
         tile_size = default_tile_size(n_points, maxs[:2] - mins[:2], radius)
     tile_size = _positive_length("tile_size", tile_size)
-    grid = TileGrid.for_radius(mins[:2], tile_size, radius)
+    grid = TileGrid.for_radius(mins[:2], tile_size, radius, _reach(options))
     work = os.path.abspath(work_dir or out_path + ".meshcurv-work")
     st = os.stat(in_path)
     manifest = {"input": in_path, "size": st.st_size, "mtime_ns": st.st_mtime_ns,
@@ -334,7 +334,7 @@ def principal_curvatures_tiled(vertices, radius, tile_size, normals=None, *, ori
     chunk_size = _positive_count("chunk_size", chunk_size)
     finite = np.isfinite(v).all(axis=1)
     origin = v[finite, :2].min(axis=0) if finite.any() else np.zeros(2)
-    grid = TileGrid.for_radius(origin, tile_size, radius)
+    grid = TileGrid.for_radius(origin, tile_size, radius, _reach(options))
     n = len(v)
     report = TiledReport(n_points=n, n_tiles=0, radius=radius, tile_size=tile_size, halo=grid.halo)
     with contextlib.ExitStack() as stack:
@@ -363,6 +363,12 @@ def principal_curvatures_tiled(vertices, radius, tile_size, normals=None, *, ori
     report.stage_seconds["write"] = time.perf_counter() - t_write
     report.seconds = time.perf_counter() - t0
     return (res, report) if return_report else res
+
+
+def _reach(options):
+    """Halo width in radii: 2 with the outlier pass (a tile point's neighbors are scored on
+    their own balls), else 1."""
+    return 2.0 if options.get("robust_points", True) else 1.0
 
 
 def _check_estimator_options(orientation, options):

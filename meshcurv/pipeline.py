@@ -583,8 +583,10 @@ def run_radii(v, f, given_normals, radii, query, plan, progress=False):
             point_weights = weight if s.rank is None else weight[s.rank]
         scores.append(score)
         weights.append(point_weights)
-    starts = [_start_normals(v, f, given_normals, r, s, finite, plan, progress, w)
-              for s, r, w in zip(searches, radii, weights)]
+    # the spanning tree's normals unweighted: they are estimate_normals', which tiled runs
+    # share between tiles (the weighted local jet refines them)
+    starts = [_start_normals(v, f, given_normals, r, s, finite, plan, progress)
+              for s, r in zip(searches, radii)]
     outs = [_Outputs(len(query)) for _ in radii]
     given_a2 = [given_normal_noise(v, start[0], r, s, query) if plan.check_given else 0.0
                 for s, r, start in zip(searches, radii, starts)]
@@ -594,7 +596,14 @@ def run_radii(v, f, given_normals, radii, query, plan, progress=False):
         if plan.normal_constraints and nv is None:
             nv = _pca_field(v, face_normals, s, finite, r, plan, progress, weights[i])
             starts[i] = (nv, face_normals, note)
-        fields.append(_normal_field(nv, s, plan))
+        field = nv
+        if (plan.normal_constraints and weights[i] is not None and plan.refine
+                and nv is not None and np.any(weights[i] < 1.0)):
+            # estimated normals (the spanning tree's, or a tile's) fitted again with the
+            # outlier weights for the neighbors' normal rows, keeping their sides: a stray
+            # point tilts the plane fits of all its neighbors
+            field = _pca_field(v, nv, s, finite, r, plan, progress, weights[i])
+        fields.append(_normal_field(field, s, plan))
     # queries by grid cell for ball queries (the points a block touches then stay in cache);
     # as given for k-rings, whose memory accesses follow the mesh's own numbering
     order = len(query) if plan.use_kring else spatial_order(v[query], max(radii))

@@ -23,8 +23,8 @@ class TileGrid:
 
     @classmethod
     def for_radius(cls, origin, tile_size, radius, reach=1):
-        """Grid whose halo covers ``reach`` radii with a margin against rounding (2 where each
-        neighbor's own estimated normal enters the fit: normal-aware circle fits).
+        """Grid whose halo covers ``reach`` radii with a margin against rounding (see
+        :func:`meshcurv.tiled.run._halo_reach`).
 
         Raises ValueError for tiles narrower than the radius: their work would be mostly halo,
         and every point would belong to many tiles.

@@ -8,7 +8,7 @@ import numpy as np
 from . import pipeline
 from .autoradius import auto_radius
 from .inputs import as_arrays
-from .neighbors import default_radius, power_of_two_scale
+from .neighbors import MAX_BALL_FRACTION, default_radius, power_of_two_scale
 from .options import Options, resolve_plan
 from .result import Status
 
@@ -119,6 +119,9 @@ def _resolve_radius(radius, v, f, given_normals, settings):
             # pilot runs with this call's options; min_points is auto_radius' own smallest ball
             pilot = {k: val for k, val in settings.items() if k != "min_points"}
             radius = float(auto_radius(v, f, normals=given_normals, **pilot))
+            # small inputs: no ball beyond a quarter of the points, as the default's
+            radius = min(radius, float(default_radius(
+                v, target_neighbors=MAX_BALL_FRACTION * n_finite, faces=f)))
         else:
             raise ValueError(f"radius must be a number of model units, None or 'auto', "
                              f"got {radius!r}")

@@ -9,8 +9,9 @@ compiled kernels :func:`nearest_in_lists` and :func:`orient_spanning_tree`.
 The global sign of a piece (:func:`piece_signs`)
 -------------------------------------------------
 The spanning tree makes the normals of a connected piece agree with each other; which of the
-two sides is "outward" is a separate decision, taken per piece from three sums over its points
-(each point standing for an equal share of the area, i.e. roughly even sampling):
+two sides is "outward" is a separate decision, taken per piece from three sums over its points,
+each weighted by the share of the area the point stands for (:func:`sample_areas`), so that
+uneven sampling does not change the decision:
 
 - **closed pieces, outward.** By Gauss' theorem the area-weighted normals of a closed surface
   sum to zero, and ``sum (p - c) . n dA = 3 x volume > 0`` for outward normals whatever the
@@ -42,6 +43,7 @@ from ..linalg import CHUNK
 from ..neighbors import grid
 
 __all__ = ["orient_like", "orient_towards", "orient_along", "orient_mst", "piece_signs",
+           "sample_areas", "nearest_areas",
            "orientation_note", "CLOSED_MEAN_NORMAL", "SIDEWAYS_MEAN_NORMAL_Z", "PIECE_RULES",
            "nearest_in_lists", "orient_spanning_tree"]
 
@@ -84,9 +86,10 @@ def piece_signs(count, normal_sum, centroid_score):
 
     Parameters
     ----------
-    count : (c,) float, points of each piece
-    normal_sum : (c, 3) float, sum of its unit normals
-    centroid_score : (c,) float, sum over its points of ``(p - centroid) . n``
+    count : (c,) float, the area of each piece (the sum of :func:`sample_areas`; or its points)
+    normal_sum : (c, 3) float, the same-weighted sum of its unit normals
+    centroid_score : (c,) float, the same-weighted sum over its points of
+        ``(p - centroid) . n``, the centroid weighted alike
 
     Returns
     -------
@@ -107,6 +110,37 @@ def piece_signs(count, normal_sum, centroid_score):
     rule = np.where(open_piece, np.where(facing_up, 1, 2), 0).astype(np.int8)
     score = np.where(rule == 1, normal_sum[:, 2], np.asarray(centroid_score, dtype=np.float64))
     return np.where(score < 0, -1.0, 1.0), rule
+
+
+def sample_areas(points, neighbors):
+    """Share of the surface each point stands for, up to a common factor: the squared distance
+    to the farthest of its graph neighbors ((n,) float64; 0 for a point without neighbors).
+
+    Weighting the sums of :func:`piece_signs` by it makes their decision independent of the
+    sampling density: a closed cloud sampled ten times more densely on one side still has
+    area-weighted normals summing to about zero.
+
+    ``points`` (n, 3); ``neighbors`` (n, k) int, indices into ``points``, -1 for none.
+    """
+    nb = np.asarray(neighbors)
+    d = points[np.where(nb >= 0, nb, 0)] - points[:, None, :]
+    d2 = np.where(nb >= 0, np.einsum("ijk,ijk->ij", d, d), 0.0)
+    return d2.max(axis=1, initial=0.0)
+
+
+def nearest_areas(points, query_points, radius, k):
+    """:func:`sample_areas` of ``query_points`` (m, 3) whose graph is their ``k`` nearest
+    ``points`` (n, 3) within ``radius`` (coincident ones left out), as the spanning tree's graph
+    from ball lists is: (m,) float64."""
+    if len(points) == 0 or len(query_points) == 0:
+        return np.zeros(len(query_points))
+    kk = min(len(points), k + 8)         # room for coincident points
+    dist, _ = cKDTree(points).query(query_points, k=kk, distance_upper_bound=radius * (1 + 1e-12))
+    dist = np.asarray(dist).reshape(len(query_points), -1)
+    dist = np.where((dist > 0) & np.isfinite(dist), dist, np.inf)
+    dist = np.sort(dist, axis=1)[:, :k]
+    d2 = np.where(np.isfinite(dist), dist * dist, 0.0)
+    return d2.max(axis=1, initial=0.0)
 
 
 def orientation_note(rule, count):
@@ -205,17 +239,19 @@ def orient_mst(points, normals, k=10, neighbors=None, note=False):
     labels_input = np.empty_like(labels)
     labels_input[order] = order[labels]
     labels = labels_input
-    # one global decision per connected piece
+    # one global decision per connected piece, each point standing for its share of the area
     n_comp = len(ok)                       # labels are root rows: bins 0..len(ok) - 1
     count = np.bincount(labels, minlength=n_comp)
-    size = np.maximum(count, 1)
-    centroid = np.column_stack([np.bincount(labels, weights=p[:, c], minlength=n_comp)
+    area = sample_areas(p, nb)
+    weight = np.bincount(labels, weights=area, minlength=n_comp)
+    size = np.where(weight > 0, weight, 1.0)
+    centroid = np.column_stack([np.bincount(labels, weights=area * p[:, c], minlength=n_comp)
                                 for c in range(3)]) / size[:, None]
-    score = np.bincount(labels, weights=np.einsum("ij,ij->i", p - centroid[labels], nv),
+    score = np.bincount(labels, weights=area * np.einsum("ij,ij->i", p - centroid[labels], nv),
                         minlength=n_comp)
-    normal_sum = np.column_stack([np.bincount(labels, weights=nv[:, c], minlength=n_comp)
-                                  for c in range(3)])
-    sign, rule = piece_signs(count, normal_sum, score)
+    normal_sum = np.column_stack([np.bincount(labels, weights=area * nv[:, c],
+                                              minlength=n_comp) for c in range(3)])
+    sign, rule = piece_signs(weight, normal_sum, score)
     nv[sign[labels] < 0] *= -1.0
     normals[ok] = nv
     return (normals, orientation_note(rule, count)) if note else normals

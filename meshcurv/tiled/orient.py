@@ -91,19 +91,20 @@ def _agreeing_flips(vote_m):
 
 def _sign_groups(work, names, flips, n_comp, labels):
     """Flip (in place) each group of tiles as :func:`meshcurv.normals.orient.piece_signs`
-    decides from the group's sums (count, sum of n, sum of (p - centroid) . n), gathered from
-    each tile's partial sums; returns the note of the rules taken."""
+    decides from the group's area-weighted sums (area, sum of n, sum of (p - centroid) . n),
+    gathered from each tile's partial sums; returns the note of the rules taken."""
     st = np.array([read_json(os.path.join(work, "normals", f"{nm}.json"))["orient"]
-                   for nm in names], dtype=np.float64).reshape(len(names), 8)
-    count, normal_sum, score = np.zeros(n_comp), np.zeros((n_comp, 3)), np.zeros(n_comp)
+                   for nm in names], dtype=np.float64).reshape(len(names), 9)
+    area, count = np.zeros(n_comp), np.zeros(n_comp)
+    normal_sum, score = np.zeros((n_comp, 3)), np.zeros(n_comp)
     for c in range(n_comp):
         g = labels == c
-        count[c] = st[g, 7].sum()
-        if count[c] == 0:
+        area[c], count[c] = st[g, 7].sum(), st[g, 8].sum()
+        if area[c] == 0:
             continue
-        centroid = st[g, 4:7].sum(axis=0) / count[c]
+        centroid = st[g, 4:7].sum(axis=0) / area[c]
         normal_sum[c] = flips[g] @ st[g, 1:4]
         score[c] = np.sum(flips[g] * (st[g, 0] - st[g, 1:4] @ centroid))
-    sign, rule = piece_signs(count, normal_sum, score)
+    sign, rule = piece_signs(area, normal_sum, score)
     flips *= sign[labels]
     return orientation_note(rule, count)

@@ -7,6 +7,8 @@ import time
 import numpy as np
 
 from ..io import las
+from ..normals.orient import nearest_areas
+from ..pipeline import TREE_NEIGHBORS
 from .grid import tile_name
 from .work import atomic_json, atomic_savez, load_tile, result_rows
 
@@ -148,12 +150,16 @@ def normals_task(name, work, chunk_ids, radius, grid, in_path, threads=None,
             atomic_savez(os.path.join(work, "normals", f"{name}.npz"), own_normals=nv[own],
                           band_idx=idx[border], band_normals=nv[border], halo_idx=idx[~own],
                           halo_normals=nv[~own], halo_owner=grid.own_keys(xyz[~own]))
-            # partial sums for the outward decision of a group of tiles:
-            # sum p.n, sum n, sum p, count
+            # partial sums for the outward decision of a group of tiles, each point weighted
+            # by its share of the area (as the untiled spanning tree weighs it):
+            # sum a p.n, sum a n, sum a p, sum a, count
             ok = own & np.isfinite(nv).all(axis=1)
             p, n = xyz[ok], nv[ok]
-            stats = {"orient": [float(np.einsum("ij,ij->", p, n)), *n.sum(axis=0).tolist(),
-                                *p.sum(axis=0).tolist(), int(ok.sum())]}
+            finite = np.isfinite(nv).all(axis=1) & np.isfinite(xyz).all(axis=1)
+            a = nearest_areas(xyz[finite], p, radius, TREE_NEIGHBORS)[:, None]
+            stats = {"orient": [float(np.einsum("ij,ij->", a * p, n)),
+                                *(a * n).sum(axis=0).tolist(), *(a * p).sum(axis=0).tolist(),
+                                float(a.sum()), int(ok.sum())]}
             stats.update(mem.stats())
         stats["seconds"] = time.perf_counter() - t0
         atomic_json(os.path.join(work, "normals", f"{name}.json"), stats)

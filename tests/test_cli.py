@@ -352,7 +352,8 @@ def test_las_input_annotates_in_memory_to_las_and_ply(tmp_path, capsys, las_file
     from meshcurv.io import las
 
     xyz, normals = las.read_las_points(str(las_file))
-    res = meshcurv.principal_curvatures(xyz, normals=normals, radius=0.25)
+    # the command line orients LAS input towards +z
+    res = meshcurv.principal_curvatures(xyz, normals=normals, radius=0.25, orientation="+z")
     code, _, err = run(capsys, "annotate", las_file, "-o", tmp_path / "para.laz",
                        "--radius", "0.25")
     assert code == 0, err

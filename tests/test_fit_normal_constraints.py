@@ -103,11 +103,12 @@ def test_exact_on_a_cylinder_with_exact_normals():
     inner = r.valid & (np.abs(z) < 2.0)
     assert inner.sum() > 3000
     # positions alone are exact on a cylinder only up to the slab's first-order direction mix
-    # (|dk1| ~ 3e-4 here); the exact normals' rows have no residual and carry the fit
-    np.testing.assert_allclose(r.k1[inner], 0.5, atol=1e-6)
-    np.testing.assert_allclose(r.k2[inner], 0.0, atol=1e-6)
+    # (max |dk1| ~ 1e-3 here); the exact normals' rows have no residual and carry the fit,
+    # weighed against the position rows by the measured noise: ~1e-6 is left
+    np.testing.assert_allclose(r.k1[inner], 0.5, atol=1e-5)
+    np.testing.assert_allclose(r.k2[inner], 0.0, atol=1e-5)
     off = meshcurv.principal_curvatures(v, normals=nv, radius=0.8, normal_constraints="off")
-    assert np.max(np.abs(off.k1[inner] - 0.5)) > 1e-5
+    assert np.max(np.abs(off.k1[inner] - 0.5)) > 1e-4
 
 
 def test_exact_normals_beat_positions_under_position_noise():

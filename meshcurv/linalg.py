@@ -14,6 +14,20 @@ CHUNK = 256
 
 
 @njit(cache=True)
+def jacobi_rotation(app, aqq, apq):
+    """``(c, s, t)``: cosine, sine and tangent of the Jacobi rotation that zeroes the entry
+    ``apq`` of a symmetric matrix with diagonal entries ``app``, ``aqq`` (Golub & Van Loan,
+    sym.schur2); ``apq`` non-zero."""
+    tau = (aqq - app) / (2.0 * apq)
+    if tau >= 0.0:
+        t = 1.0 / (tau + math.sqrt(1.0 + tau * tau))
+    else:
+        t = -1.0 / (-tau + math.sqrt(1.0 + tau * tau))
+    c = 1.0 / math.sqrt(1.0 + t * t)
+    return c, t * c, t
+
+
+@njit(cache=True)
 def smallest_eigvec_jacobi3(a, out):
     """Unit eigenvector of the smallest eigenvalue of the symmetric 3x3 ``a`` (overwritten).
 
@@ -44,14 +58,7 @@ def smallest_eigvec_jacobi3(a, out):
             apq = a[p, q]
             if apq == 0.0:
                 continue
-            # rotation angle that zeroes a[p, q] (Golub & Van Loan, sym.schur2)
-            tau = (a[q, q] - a[p, p]) / (2.0 * apq)
-            if tau >= 0.0:
-                t = 1.0 / (tau + math.sqrt(1.0 + tau * tau))
-            else:
-                t = -1.0 / (-tau + math.sqrt(1.0 + tau * tau))
-            c = 1.0 / math.sqrt(1.0 + t * t)
-            s = t * c
+            c, s, t = jacobi_rotation(a[p, p], a[q, q], apq)
             app = a[p, p]
             aqq = a[q, q]
             arp = a[r, p]
@@ -160,14 +167,7 @@ def sym_eig_jacobi(a, vecs, npar):
                 apq = a[p, q]
                 if apq == 0.0:
                     continue
-                # rotation angle that zeroes a[p, q] (Golub & Van Loan, sym.schur2)
-                tau = (a[q, q] - a[p, p]) / (2.0 * apq)
-                if tau >= 0.0:
-                    t = 1.0 / (tau + math.sqrt(1.0 + tau * tau))
-                else:
-                    t = -1.0 / (-tau + math.sqrt(1.0 + tau * tau))
-                c = 1.0 / math.sqrt(1.0 + t * t)
-                s = t * c
+                c, s, _ = jacobi_rotation(a[p, p], a[q, q], apq)
                 for k in range(npar):          # columns p, q: a <- a J
                     akp = a[k, p]
                     akq = a[k, q]

@@ -257,3 +257,33 @@ def test_tiles_whose_overlaps_disagree_are_flipped_to_agree():
     flips, n_groups, labels = _agreeing_flips(votes)
     assert flips.tolist() == [1.0, -1.0, 1.0]
     assert n_groups == 1 and labels.tolist() == [0, 0, 0]
+
+
+def test_a_closed_cloud_sampled_densely_on_one_side_still_points_outward():
+    # a sphere whose lower half is sampled 10x more densely: its mean unit normal per point is
+    # ~0.41 (it would read as an open view), per area ~0 (Gauss)
+    rng = np.random.default_rng(5)
+    p = rng.normal(size=(60000, 3))
+    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    keep = (p[:, 2] < 0) | (rng.uniform(size=len(p)) < 0.1)
+    p = p[keep][:12000]
+    assert np.linalg.norm(p.mean(axis=0)) > 0.3
+    res = meshcurv.principal_curvatures(p)
+    assert res.orientation == CLOSED
+    assert_signs_right(res, p, np.ones(len(p)))
+
+
+def test_tile_area_weights_are_those_of_the_spanning_tree_graph():
+    from meshcurv.normals.orient import nearest_areas, nearest_in_lists, sample_areas
+    from meshcurv.pipeline import TREE_NEIGHBORS, ball_search
+
+    rng = np.random.default_rng(6)
+    p = rng.uniform(size=(3000, 3)) * [1.0, 1.0, 0.05]
+    p[10] = p[11]                                    # coincident points are nobody's neighbor
+    radius = 0.06
+    search = ball_search(p, np.arange(len(p)), radius)
+    indptr, indices = search.neighbors(np.arange(len(p)))
+    near = nearest_in_lists(search.points, p, indptr, indices, TREE_NEIGHBORS)
+    graph = np.where(near >= 0, search.rank[near], -1)
+    np.testing.assert_allclose(nearest_areas(p, p, radius, TREE_NEIGHBORS),
+                               sample_areas(p, graph), rtol=1e-12)

@@ -602,38 +602,9 @@ def run_radii(v, f, given_normals, radii, query, plan, progress=False):
         shared = ball_search(v, finite, max(radii))
         searches = [shared] * len(radii)
         block = block_size(shared, query, max(radii), what)
-    scores, weights = [], []
-    for s, r in zip(searches, radii):
-        score = point_weights = None
-        if plan.robust_points:
-            # scores by vertex; weights by row of s.points (the grid's order where it has one)
-            score = outlier_scores(v, r, s, _scored_rows(v, s, query, finite, block, plan),
-                                   progress, block)
-            weight = outliers.outlier_weight(score)
-            point_weights = weight if s.rank is None else weight[s.rank]
-        scores.append(score)
-        weights.append(point_weights)
-    # the spanning tree's normals unweighted: they are estimate_normals', which tiled runs
-    # share between tiles (the weighted local jet refines them)
-    starts = [_start_normals(v, f, given_normals, r, s, finite, plan, progress)
+    scales = [_prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progress)
               for s, r in zip(searches, radii)]
     outs = [_Outputs(len(query)) for _ in radii]
-    given_a2 = [given_normal_noise(v, start[0], r, s, query) if plan.check_given else 0.0
-                for s, r, start in zip(searches, radii, starts)]
-    fields, before_fields = [], list(starts)
-    for i, (s, r) in enumerate(zip(searches, radii)):
-        nv, face_normals, note = starts[i]
-        if plan.normal_constraints and nv is None:
-            nv = _pca_field(v, face_normals, s, finite, r, plan, progress, weights[i])
-            starts[i] = (nv, face_normals, note)
-        field = nv
-        if (plan.normal_constraints and weights[i] is not None and plan.refine
-                and nv is not None and np.any(weights[i] < 1.0)):
-            # estimated normals (the spanning tree's, or a tile's) fitted again with the
-            # outlier weights for the neighbors' normal rows, keeping their sides: a stray
-            # point tilts the plane fits of all its neighbors
-            field = _pca_field(v, nv, s, finite, r, plan, progress, weights[i])
-        fields.append(_normal_field(field, s, plan))
     # queries by grid cell for ball queries (the points a block touches then stay in cache);
     # as given for k-rings, whose memory accesses follow the mesh's own numbering
     order = len(query) if plan.use_kring else spatial_order(v[query], max(radii))
@@ -641,25 +612,74 @@ def run_radii(v, f, given_normals, radii, query, plan, progress=False):
         idx = query[pos]
         xb = v[idx]
         lists = None if plan.use_kring else shared.neighbors(idx)
-        for out, search, r, (nv, face_normals, _), a2, field, w in zip(
-                outs, searches, radii, starts, given_a2, fields, weights):
-            indptr, indices = search.neighbors(idx) if plan.use_kring else lists
-            qb = _block_normals(nv, face_normals, idx, xb, indptr, indices, r, search, plan, w)
-            _fit_block(out, pos, xb, qb, indptr, indices, r, search, plan, a2, field, w)
+        for out, sc in zip(outs, scales):
+            indptr, indices = sc.search.neighbors(idx) if plan.use_kring else lists
+            qb = _block_normals(sc.block_normals, sc.face_normals, idx, xb, indptr, indices,
+                                sc.radius, sc.search, plan, sc.weights)
+            _fit_block(out, pos, xb, qb, indptr, indices, sc.radius, sc.search, plan,
+                       sc.given_a2, sc.field, sc.weights)
             del indptr, indices
         del lists
-    # retried rows get normals of their own, wider balls (not the field of this radius)
-    for out, search, r, (nv, face_normals, _) in zip(outs, searches, radii, before_fields):
+    results = []
+    for out, sc in zip(outs, scales):
         if plan.sparse_retry:
-            retry_sparse(out, v, f, nv, face_normals, r, query, plan, search)
-    for out, score in zip(outs, scores):
-        if score is not None:
-            out.outlier_score[:] = score[query]
+            # retried rows get normals of their own, wider balls (not this radius' field)
+            retry_sparse(out, v, f, sc.start_normals, sc.face_normals, sc.radius, query, plan,
+                         sc.search)
+        if sc.score is not None:
+            out.outlier_score[:] = sc.score[query]
             out.flag_outliers()
-    results = [out.result(r) for out, r in zip(outs, radii)]
-    for res, (_, _, note) in zip(results, starts):
-        res.orientation = note
+        res = out.result(sc.radius)
+        res.orientation = sc.note
+        results.append(res)
     return results
+
+
+class _Scale(NamedTuple):
+    """What the blocks of one radius use (:func:`_prepare_scale`): the radius and its search;
+    the outlier ``score`` (by vertex) and ``weights`` (by row of ``search.points``), None
+    without the outlier pass; ``start_normals``, ``face_normals`` and ``note`` of
+    :func:`_start_normals`; ``block_normals``, the same or the plane-fit field of
+    :func:`_pca_field`; ``given_a2`` (:func:`given_normal_noise`); ``field``, the neighbors'
+    normals of the normal-aware fits (:func:`_normal_field`) or None."""
+
+    radius: float
+    search: Search
+    score: object
+    weights: object
+    start_normals: object
+    face_normals: object
+    note: str
+    block_normals: object
+    given_a2: float
+    field: object
+
+
+def _prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progress):
+    """The :class:`_Scale` of radius ``r`` over the search ``s``."""
+    score = weights = None
+    if plan.robust_points:
+        # scores by vertex; weights by row of s.points (the grid's order where it has one)
+        score = outlier_scores(v, r, s, _scored_rows(v, s, query, finite, block, plan),
+                               progress, block)
+        weight = outliers.outlier_weight(score)
+        weights = weight if s.rank is None else weight[s.rank]
+    # the spanning tree's normals unweighted: they are estimate_normals', which tiled runs
+    # share between tiles (the weighted local jet refines them)
+    nv, face_normals, note = _start_normals(v, f, given_normals, r, s, finite, plan, progress)
+    given_a2 = given_normal_noise(v, nv, r, s, query) if plan.check_given else 0.0
+    block_nv = nv
+    if plan.normal_constraints and nv is None:
+        block_nv = _pca_field(v, face_normals, s, finite, r, plan, progress, weights)
+    field = block_nv
+    if (plan.normal_constraints and weights is not None and plan.refine
+            and block_nv is not None and np.any(weights < 1.0)):
+        # estimated normals (the spanning tree's, or a tile's) fitted again with the outlier
+        # weights for the neighbors' normal rows, keeping their sides: a stray point tilts
+        # the plane fits of all its neighbors
+        field = _pca_field(v, block_nv, s, finite, r, plan, progress, weights)
+    return _Scale(r, s, score, weights, nv, face_normals, note, block_nv, given_a2,
+                  _normal_field(field, s, plan))
 
 
 def _needs_support(out, plan):

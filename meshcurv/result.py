@@ -64,8 +64,9 @@ class CurvatureResult:
     n_neighbors : (n,) int32, neighbors within the radius
     n_samples : (n,) int32, circle fits used in the Euler fit (at most ``2 * n_directions``)
     residual : (n,) float64, RMS residual of the Euler fit, 1 / model units
-    noise : (n,) float64, RMS height residual of a local cubic fit over the neighborhood,
-        model units: an estimate of the noise along the normal (NaN with fewer than 11 points)
+    noise : (n,) float64, RMS height residual of a local quartic (cubic where too few points)
+        fit over the neighborhood, model units: an estimate of the noise along the normal (NaN
+        with fewer than 11 points)
     radius : float, the neighborhood radius used, model units
     status : (n,) int8, why a row has no estimate (:class:`Status`; ``Status.OK`` where
         ``valid``), or None where the producer does not tell

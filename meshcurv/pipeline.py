@@ -673,11 +673,12 @@ def _prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progre
         block_nv = _pca_field(v, face_normals, s, finite, r, plan, progress, weights)
     field = block_nv
     if (plan.normal_constraints and weights is not None and plan.refine
-            and block_nv is not None and np.any(weights < 1.0)):
-        # estimated normals (the spanning tree's, or a tile's) fitted again with the outlier
-        # weights for the neighbors' normal rows, keeping their sides: a stray point tilts
-        # the plane fits of all its neighbors
-        field = _pca_field(v, block_nv, s, finite, r, plan, progress, weights)
+            and nv is not None and np.any(weights < 1.0)):
+        # estimated normals made before the outlier weights (the spanning tree's, or a
+        # tile's) fitted again with them for the neighbors' normal rows, keeping their sides:
+        # a stray point tilts the plane fits of all its neighbors (the plane-fit field above
+        # has the weights already)
+        field = _pca_field(v, nv, s, finite, r, plan, progress, weights)
     return _Scale(r, s, score, weights, nv, face_normals, note, block_nv, given_a2,
                   _normal_field(field, s, plan))
 

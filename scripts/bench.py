@@ -17,6 +17,12 @@ holding about 100 points. Methods:
 - libigl ``principal_curvature`` (quadric fit over the k-ring nearest the radius) when ``igl``
   is installed.
 
+Whole commands, timed end to end as processes (start-up, reading and writing included):
+
+- ``meshcurv annotate`` of a 600k-point LAZ terrain scan, untiled and tiled on a local Dask
+  cluster (``--tile-size``: 4 tiles, one worker per core);
+- ``meshcurv batch`` of four 100k-vertex meshes with ``--jobs 1`` and ``--jobs 2``.
+
 Reported per run: the median wall time of ``--repeat`` calls (compilation excluded: kernels are
 compiled or loaded from the numba cache first), vertices per second, the speed-up over MeshLab
 Taubin and SDQF on the same data (above 1 = faster than that method), and the peak resident
@@ -271,6 +277,73 @@ print(json.dumps(dict(import_s=t1 - t0, first_mesh_s=t3 - t2, first_cloud_s=t5 -
 """
 
 
+def terrain_cloud(n_points, side=100.0, seed=0):
+    """``n_points`` random points (n, 3) of a smooth height field over a ``side`` x ``side``
+    square (a terrain scan's shape), in random order."""
+    rng = np.random.default_rng(seed)
+    xy = rng.uniform(0.0, side, (n_points, 2))
+    z = 0.04 * side * np.sin(6.0 * xy[:, 0] / side) * np.cos(5.0 * xy[:, 1] / side)
+    return np.column_stack([xy, z])
+
+
+def _write_laz(path, points):
+    import laspy
+
+    header = laspy.LasHeader(point_format=3, version="1.4")
+    header.scales = np.full(3, 1e-4)
+    header.offsets = points.min(axis=0)
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = points[:, 0], points[:, 1], points[:, 2]
+    las.write(path)
+
+
+def _timed_command(args, repeat):
+    """Median wall time (s) of ``repeat`` runs of the command ``args``; raises on failure."""
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        p = subprocess.run(args, capture_output=True, text=True)
+        times.append(time.perf_counter() - t0)
+        if p.returncode != 0:
+            raise RuntimeError(f"{' '.join(args)} failed: {p.stderr[-500:]}")
+    return float(np.median(times))
+
+
+def command_rows(quick, repeat):
+    """Rows of the whole-command measurements: tiled and untiled LAZ annotation, and batch runs
+    with one and two jobs (see the module docstring)."""
+    from meshcurv import io
+
+    meshcurv_cmd = [sys.executable, "-m", "meshcurv"]
+    n_scan, n_mesh = (20_000, 4000) if quick else (600_000, 100_000)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        scan = os.path.join(tmp, "scan.laz")
+        _write_laz(scan, terrain_cloud(n_scan))
+        data = f"LAZ {_count(n_scan)}"
+        for label, extra in (("annotate (untiled)", []),
+                             ("annotate --tile-size (4 tiles)", ["--tile-size", "50"])):
+            out = os.path.join(tmp, "out.laz")
+            seconds = _timed_command(meshcurv_cmd + ["annotate", scan, "-o", out] + extra, repeat)
+            rows.append(dict(data=data, n=n_scan, radius=float("nan"), method=label,
+                             seconds=seconds, peak_bytes=float("nan"), status="ok"))
+            _progress(rows[-1])
+        folder = os.path.join(tmp, "meshes")
+        os.mkdir(folder)
+        for i in range(4):
+            v, f, _ = torus_mesh(n_mesh, major=2.0 + 0.1 * i)
+            io.write_ply(os.path.join(folder, f"torus{i}.ply"), v, f)
+        data = f"batch 4x{_count(n_mesh)}"
+        for jobs in (1, 2):
+            seconds = _timed_command(meshcurv_cmd + ["batch", folder, "-O", os.path.join(tmp, "o"),
+                                                     "--overwrite", "--jobs", str(jobs)], repeat)
+            rows.append(dict(data=data, n=4 * n_mesh, radius=float("nan"),
+                             method=f"batch --jobs {jobs}", seconds=seconds,
+                             peak_bytes=float("nan"), status="ok"))
+            _progress(rows[-1])
+    return rows
+
+
 def first_call_times():
     """``import meshcurv`` and first calls (mesh, cloud) in a fresh process, warm numba cache."""
     code = _FIRST_CALL.format(here=os.path.dirname(os.path.abspath(__file__)))
@@ -289,13 +362,13 @@ def stage_times(v, f, normals, radius):
     call's time is numpy and Python glue. Returns ``{mode: {stage: seconds}}``.
     """
     import meshcurv
-    from meshcurv.fit import fused, jet
+    from meshcurv.fit import fused, jet, outliers
     from meshcurv.neighbors import grid, kring
-    from meshcurv.normals import orient, pca
+    from meshcurv.normals import orient, pca, sphere
 
     spent = {}
     # the kernels the pipeline calls from Python, by module
-    originals = {(module, name): fn for module in (grid, kring, pca, orient, jet, fused)
+    originals = {(module, name): fn for module in (grid, kring, pca, sphere, orient, jet, outliers, fused)
                  for name, fn in vars(module).items()
                  if hasattr(fn, "py_func") and not name.startswith("_")}
 
@@ -332,7 +405,8 @@ def stage_times(v, f, normals, radius):
 # Run and report
 # ---------------------------------------------------------------------------------------------
 
-def run(quick=False, repeat=3, apss_timeout=900.0, methods=None, stages=True, data=None):
+def run(quick=False, repeat=3, apss_timeout=900.0, methods=None, stages=True, data=None,
+        commands=True):
     """Run the benchmark; returns a dict with ``rows`` (one per data set and method) and more."""
     from meshcurv.neighbors import default_radius
 
@@ -374,6 +448,8 @@ def run(quick=False, repeat=3, apss_timeout=900.0, methods=None, stages=True, da
             _progress(report["rows"][-1])
         if stages and n >= (16000 if quick else 1_000_000):
             report["stages"][name] = stage_times(v, f, exact_normals, radius)
+    if commands:
+        report["rows"] += command_rows(quick, 1)
     _add_ratios(report)
     return report
 
@@ -392,6 +468,13 @@ def _add_ratios(report):
             r[key] = base["seconds"] / r["seconds"] if base and r["seconds"] > 0 else float("nan")
         r["vertices_per_s"] = r["n"] / r["seconds"] if r["seconds"] > 0 else float("nan")
         r["bytes_per_vertex"] = r["peak_bytes"] / r["n"]
+    for data, single, parallel in (("LAZ", "annotate (untiled)", "annotate --tile-size"),
+                                   ("batch", "batch --jobs 1", "batch --jobs 2")):
+        for r in report["rows"]:
+            base = next((b for b in report["rows"] if b["data"] == r["data"]
+                         and b["method"].startswith(single)), None)
+            if r["data"].startswith(data) and r["method"].startswith(parallel) and base:
+                r["vs_single"] = base["seconds"] / r["seconds"]
     scaling = {}
     size = {r["data"]: r["n"] for r in report["rows"]}
     for shape in ("torus", "sphere"):
@@ -418,9 +501,12 @@ def format_table(report):
             continue
         lines.append(f"| {r['data']} | {r['method']} | {r['seconds']:.3f} | "
                      f"{r['vertices_per_s'] / 1e3:,.0f}k | {_ratio(r['vs_taubin'])} | "
-                     f"{_ratio(r['vs_sdqf'])} | {r['bytes_per_vertex']:,.0f} |")
+                     f"{_ratio(r['vs_sdqf'])} | {_bytes(r['bytes_per_vertex'])} |")
     lines += ["", "Speed-up = time of the MeshLab method / time of this method on the same data "
-              "(above 1: faster).", ""]
+              "(above 1: faster). Whole commands (LAZ, batch): points or vertices per second "
+              "end to end; the tiled and two-job runs' speed-up over the untiled and one-job "
+              "ones: " + ", ".join(f"{r['data']} {r['method']} {r['vs_single']:.2f}x"
+                                   for r in report["rows"] if "vs_single" in r) + ".", ""]
     if report["scaling"]:
         lines += ["| time(large) / time(small) | size ratio | time ratio |", "|---|---:|---:|"]
         for k, s in report["scaling"].items():
@@ -444,6 +530,10 @@ def format_table(report):
     return "\n".join(lines)
 
 
+def _bytes(x):
+    return "" if not np.isfinite(x) else f"{x:,.0f}"
+
+
 def _ratio(x):
     return "" if not np.isfinite(x) else f"{x:.2f}x"
 
@@ -456,6 +546,8 @@ def main(argv=None):
     ap.add_argument("--methods", nargs="*", help="only methods whose label starts with these")
     ap.add_argument("--data", nargs="*", help="only data sets whose name starts with these")
     ap.add_argument("--no-stages", action="store_true", help="skip the per-stage split")
+    ap.add_argument("--no-commands", action="store_true",
+                    help="skip the whole-command runs (tiled LAZ, batch)")
     ap.add_argument("--apss-timeout", type=float, default=900.0, help="seconds per APSS run")
     ap.add_argument("--apss-worker", metavar="NPZ", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -467,7 +559,8 @@ def main(argv=None):
         env = dict(os.environ, **{_MMAP_ENV: "65536"})
         os.execve(sys.executable, [sys.executable, os.path.abspath(__file__)] + sys.argv[1:], env)
     report = run(quick=args.quick, repeat=args.repeat, apss_timeout=args.apss_timeout,
-                 methods=args.methods, stages=not args.no_stages, data=args.data)
+                 methods=args.methods, stages=not args.no_stages, data=args.data,
+                 commands=not args.no_commands)
     print(format_table(report))
     if args.json:
         with open(args.json, "w") as fh:

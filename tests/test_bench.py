@@ -20,7 +20,7 @@ SCRIPT = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))
 def quick_report(tmp_path_factory):
     out = tmp_path_factory.mktemp("bench") / "bench.json"
     p = subprocess.run([sys.executable, SCRIPT, "--quick", "--repeat", "1", "--json", str(out)],
-                       capture_output=True, text=True, timeout=300)
+                       capture_output=True, text=True, timeout=600)
     assert p.returncode == 0, p.stderr[-2000:]
     return json.loads(out.read_text()), p.stdout
 
@@ -28,7 +28,8 @@ def quick_report(tmp_path_factory):
 def test_quick_benchmark_times_meshcurv_and_meshlab_on_every_mesh(quick_report):
     report, _ = quick_report
     rows = {(r["data"], r["method"]): r for r in report["rows"]}
-    meshes = {r["data"] for r in report["rows"] if not r["data"].startswith("cloud")}
+    meshes = {r["data"] for r in report["rows"]
+              if not r["data"].startswith(("cloud", "LAZ", "batch"))}
     assert len(meshes) == 4
     for data in meshes:
         for method in ("meshcurv", "meshcurv (est.)", "MeshLab Taubin", "MeshLab SDQF"):
@@ -47,3 +48,13 @@ def test_quick_benchmark_reports_ratios_memory_and_first_call(quick_report):
     assert np.isfinite(row["bytes_per_vertex"]) and row["bytes_per_vertex"] >= 0
     assert report["first_call"]["first_mesh_s"] > 0
     assert "| data | method |" in table and "vs SDQF" in table
+
+
+def test_quick_benchmark_times_the_whole_commands(quick_report):
+    report, table = quick_report
+    rows = {r["method"]: r for r in report["rows"]
+            if r["data"].startswith(("LAZ", "batch"))}
+    assert set(rows) == {"annotate (untiled)", "annotate --tile-size (4 tiles)",
+                         "batch --jobs 1", "batch --jobs 2"}
+    assert all(r["seconds"] > 0 for r in rows.values())
+    assert rows["batch --jobs 2"]["vs_single"] > 0 and "batch --jobs 2" in table

@@ -82,3 +82,63 @@ def test_run_batch_gives_each_job_its_share(monkeypatch, no_user_threads, tmp_pa
     assert [r["status"] for r in results] == ["ok"] * 3
     assert made == [(2, 2)]
     assert not os.path.exists(tmp_path / "out" / "a_curvature.ply")  # nothing really ran
+
+
+# ------------------------------------------------------------------------------ LAS/LAZ writes
+
+def _point_record(point_format, n, seed=0):
+    """A laspy record of ``n`` points of ``point_format`` with random raw bytes in every dim."""
+    import laspy
+    import numpy as np
+
+    header = laspy.LasHeader(point_format=point_format, version="1.4")
+    rec = laspy.ScaleAwarePointRecord.zeros(n, header=header)
+    raw = np.random.default_rng(seed).integers(0, 256, rec.array.nbytes, dtype=np.uint8)
+    rec.array.view(np.uint8)[:] = raw
+    return rec, header
+
+
+@pytest.mark.parametrize("point_format", [0, 1, 3, 6, 8])
+def test_block_copy_of_the_input_dims_equals_the_field_by_field_copy(point_format):
+    import copy
+
+    import laspy
+    import numpy as np
+
+    from meshcurv.io import las
+
+    rec, header = _point_record(point_format, 1000)
+    out_header = copy.deepcopy(header)
+    out_header.add_extra_dims([laspy.ExtraBytesParams(name="k1", type=np.float64),
+                               laspy.ExtraBytesParams(name="valid", type=np.uint8)])
+    fast = laspy.ScaleAwarePointRecord.zeros(len(rec), header=out_header)
+    slow = laspy.ScaleAwarePointRecord.zeros(len(rec), header=out_header)
+    las._copy_input_dims(rec.array, fast.array)
+    for name in rec.array.dtype.names:
+        slow.array[name] = rec.array[name]
+    assert fast.array.tobytes() == slow.array.tobytes()
+    # the new dims are left as they were (zero) for the caller to fill
+    assert not fast.array["k1"].any() and not fast.array["valid"].any()
+
+
+def test_block_copy_falls_back_when_the_layouts_differ():
+    import numpy as np
+
+    from meshcurv.io import las
+
+    source = np.zeros(3, dtype=[("X", "<i4"), ("Y", "<i4")])
+    source["X"], source["Y"] = [1, 2, 3], [4, 5, 6]
+    target = np.zeros(3, dtype=[("Y", "<i4"), ("X", "<i4"), ("k1", "<f8")])
+    las._copy_input_dims(source, target)
+    assert target["X"].tolist() == [1, 2, 3] and target["Y"].tolist() == [4, 5, 6]
+
+
+def test_laz_writes_use_the_multithreaded_lazrs_backend_when_installed():
+    import laspy
+
+    from meshcurv.io import las
+
+    backends = las.laz_backends()
+    if laspy.LazBackend.LazrsParallel.is_available():
+        assert backends[0] is laspy.LazBackend.LazrsParallel
+    assert all(b.is_available() for b in backends)

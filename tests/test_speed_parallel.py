@@ -142,3 +142,15 @@ def test_laz_writes_use_the_multithreaded_lazrs_backend_when_installed():
     if laspy.LazBackend.LazrsParallel.is_available():
         assert backends[0] is laspy.LazBackend.LazrsParallel
     assert all(b.is_available() for b in backends)
+
+
+# ------------------------------------------------------------------------------ tiled runs
+
+def test_tiled_local_cluster_workers_run_their_share_of_the_threads(no_user_threads):
+    from meshcurv.tiled.cluster import dask_client
+
+    share = max(1, threads.available_cores() // 2)
+    with dask_client(None, 2) as (client, per_task):
+        seen = client.run(threads.numba_thread_counts)
+    assert per_task == share
+    assert sorted(seen.values()) == [(share, share)] * 2

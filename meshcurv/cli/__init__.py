@@ -169,7 +169,8 @@ def _add_batch_parser(sub):
         formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("inputs", nargs="+", help="input files or directories (their readable files)")
     p.add_argument("--out-dir", "-O", required=True, help="directory for the annotated PLYs")
-    p.add_argument("--jobs", "-j", type=int, default=1, help="parallel processes (default 1)")
+    p.add_argument("--jobs", "-j", type=int, default=1, help="parallel processes (default 1), each with cores / JOBS "
+                   "numba threads (at least 1; NUMBA_NUM_THREADS, if set, is each one's count)")
     p.add_argument("--overwrite", action="store_true", help="recompute existing outputs")
     p.add_argument("--dask-scheduler", metavar="ADDRESS", default=None,
                    help="run on a Dask distributed cluster (e.g. tcp://host:8786); the "

@@ -29,6 +29,7 @@ import time
 from multiprocessing.connection import Connection, wait
 
 from .. import io
+from ..threads import process_environment, threads_per_process
 from .annotate import AnnotateOptions, CommandError, annotate_file
 
 __all__ = ["WorkerPool", "WorkerStartError", "crash_reason", "BatchInterrupted", "run_batch",
@@ -71,7 +72,9 @@ class _Worker:
     def __init__(self, threads):
         task_read, task_write = os.pipe()
         result_read, result_write = os.pipe()
-        env = dict(os.environ, MESHCURV_WORKER_THREADS=str(threads))
+        # the thread pool itself sized to the worker's share of the cores (numba starts
+        # NUMBA_NUM_THREADS threads whatever set_num_threads later asks for)
+        env = dict(process_environment(threads), MESHCURV_WORKER_THREADS=str(threads))
         # SIGINT stays blocked in the child until it has chosen to ignore it: a Ctrl-C during
         # its start-up then can neither kill it with a traceback nor be lost for the parent
         masked = hasattr(signal, "pthread_sigmask")
@@ -124,7 +127,8 @@ class WorkerPool:
     """``n_workers`` crash-isolated worker processes; use as a context manager.
 
     ``threads`` is the numba thread count of each worker (share the cores instead of
-    oversubscribing them). Leaving the ``with`` block stops every worker, also on an exception
+    oversubscribing them: :func:`meshcurv.threads.threads_per_process`); it is the size of
+    the worker's numba thread pool unless the user set ``NUMBA_NUM_THREADS``. Leaving the ``with`` block stops every worker, also on an exception
     or KeyboardInterrupt. Workers are started when :meth:`run` needs them and reused from task
     to task; one that dies is replaced.
     """
@@ -403,7 +407,8 @@ def run_batch(inputs, out_dir, options=AnnotateOptions(), jobs=1, overwrite=Fals
     Each dict has ``input, output, status`` ("ok", "skipped" or "failed") and, for failures,
     ``error``. Outputs that exist are skipped unless ``overwrite`` (writes are atomic, so an
     existing output is complete). Every file runs in a worker process (``jobs`` of them, reused
-    from file to file): a file that crashes its process (segmentation fault, out of memory) is
+    from file to file, ``max(1, cores // jobs)`` numba threads each unless the user set
+    ``NUMBA_NUM_THREADS``): a file that crashes its process (segmentation fault, out of memory) is
     that file's failure, ``error`` "crashed (signal 11, SIGSEGV)", and the others complete.
     ``scheduler`` (a Dask scheduler address or a ``distributed.Client``) runs the files on a
     Dask cluster whose workers see the same paths: only paths and options travel, never mesh
@@ -469,13 +474,14 @@ def _worker_failure(k, inputs, outputs, exc):
 
 def _batch_pool(inputs, outputs, options, todo, record, jobs=1):
     """The pending files on ``jobs`` crash-isolated worker processes (one for a serial run),
-    sharing the cores; a file whose worker dies is reported failed with the reason."""
+    sharing the cores (``max(1, cores // workers)`` numba threads each, or the user's
+    ``NUMBA_NUM_THREADS``); a file whose worker dies is reported failed with the reason."""
     if os.name != "posix":  # the worker pipes are POSIX file descriptors: no isolation here
         for k in todo:
             record(k, run_one(inputs[k], outputs[k], options))
         return
     n_workers = max(1, min(jobs, len(todo)))
-    threads = max(1, (os.cpu_count() or 1) // n_workers)
+    threads = threads_per_process(n_workers)
     task = run_one  # looked up now: the worker imports it by name
     with WorkerPool(n_workers, threads) as pool:
         for k, res, error in pool.run((k, task, (inputs[k], outputs[k], options))

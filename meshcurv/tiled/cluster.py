@@ -10,6 +10,7 @@ from tqdm.auto import tqdm
 
 from ..io import las
 from ..io import first_line
+from ..threads import process_environment, threads_per_process
 from .tasks import TileError
 
 __all__ = ["connect", "dask_client", "run_jobs"]
@@ -44,7 +45,9 @@ def dask_client(scheduler, n_workers, threads_per_task=None):
     LocalCluster of ``n_workers`` one-thread processes, closed on exit.
 
     Threads per task: ``threads_per_task`` if given; for the LocalCluster the cores shared out
-    among its workers; else None (numba's default, all cores of the worker's machine).
+    among its workers (:func:`meshcurv.threads.threads_per_process`, which keeps a user's
+    ``NUMBA_NUM_THREADS``), also the size of each worker's numba thread pool; else None
+    (numba's default, all cores of the worker's machine).
     """
     from distributed import Client, LocalCluster
 
@@ -55,16 +58,19 @@ def dask_client(scheduler, n_workers, threads_per_task=None):
             yield client, threads_per_task
         return
     n_workers = int(n_workers or min(os.cpu_count() or 1, 8))
+    threads = int(threads_per_task or threads_per_process(n_workers))
+    # the workers' thread pools sized to their share (the nanny sets it before numba loads)
+    env = {k: v for k, v in process_environment(threads).items() if k == "NUMBA_NUM_THREADS"}
     cluster = None
     try:
         with _workers_ignore_sigint():
             # the scheduler's HTTP server on a free port: with None it still takes 8787 and
             # warns ("Port 8787 is already in use") when another cluster holds it
             cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
-                                   dashboard_address=":0")
+                                   dashboard_address=":0", env=env)
         with Client(cluster) as client:
             client.run(_quiet_worker)
-            yield client, threads_per_task or max(1, (os.cpu_count() or 1) // n_workers)
+            yield client, threads
     except BaseException:
         # interrupted or failed: the caller reports it in one line; the scheduler and nannies
         # in this process would add warnings about the workers they stop

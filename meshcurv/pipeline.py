@@ -521,46 +521,46 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2
         field_of_points, noise,
         np.ones(b) if plan.normals == "given" and not plan.refine else
         np.where(np.isfinite(noise), 1.0 - beta, 0.0))
-    small = (np.nan, None, None)
-    if plan.bias_correction:
-        # the bias correction's smaller fit, from the same pass over the lists: the
-        # half-frequency Euler model, which absorbs what a tilted normal does to opposite
-        # half-sets of a smaller, more unevenly filled ball
-        small_out = (np.empty(b), np.empty(b), np.empty((b, 3)), np.empty((b, 3)), np.empty(b),
-                     np.empty(b), np.empty(b), np.empty(b, dtype=np.int8))
-        small = (radius * BIAS_RATIO, plan.fit[:6] + (True,) + plan.fit[7:], small_out)
     fused.curvature_cga(search.points, xb, qb, indptr, indices, radius, blend, plan.fit,
                         (k1, k2, d1, d2, samples, residual, nbrs, status), search.rank,
-                        *constraints, point_weights, *small)
+                        *constraints, point_weights)
     if plan.bias_correction:
-        k1, k2, d1, d2 = _bias_corrected(search, xb, qb, indptr, indices, radius, plan,
-                                         (k1, k2, d1, d2), small_out, noise, point_weights,
+        k1, k2, d1, d2 = _bias_corrected(search, xb, qb, indptr, indices, radius, blend, plan,
+                                         (k1, k2, d1, d2), noise, constraints + (point_weights,),
                                          samples, quadric)
     out.k1[pos], out.k2[pos], out.d1[pos], out.d2[pos] = k1, k2, d1, d2
     out.normals[pos], out.n_samples[pos], out.residual[pos] = qb, samples, residual
     out.n_neighbors[pos], out.noise[pos], out.status[pos] = nbrs, noise, status
 
 
-def _bias_corrected(search, xb, qb, indptr, indices, radius, plan, large, small, noise,
-                    point_weights, large_samples, quadric=None):
-    """``large`` (k1, k2, d1, d2) at ``radius`` extrapolated to radius 0 with ``small``, the
-    fit over the same lists within ``BIAS_RATIO * radius`` (the ``small_out`` of
-    :func:`meshcurv.fit.fused.curvature_cga`: same normals, normal constraints, point weights
-    and weight profile, the half-frequency Euler model), mixed in by the measured ``noise``
+def _bias_corrected(search, xb, qb, indptr, indices, radius, blend, plan, large, noise,
+                    constraints, large_samples, quadric=None):
+    """``large`` (k1, k2, d1, d2) at ``radius`` extrapolated to radius 0 with a second fit over
+    the same lists within ``BIAS_RATIO * radius`` (same normals, normal ``constraints`` and
+    point weights (the last four arguments of :func:`meshcurv.fit.fused.curvature_cga`) and
+    weight profile; the
+    half-frequency Euler model, which absorbs what a tilted normal does to opposite half-sets
+    of a smaller, more unevenly filled ball), mixed in by the measured ``noise``
     (:func:`clean_fraction` at :data:`BIAS_NOISE_SCALE`). ``quadric``: the local quadric's
     normals about ``qb`` (see :func:`_tilt`) where already fitted, else None."""
+    b = len(xb)
+    small = tuple(np.empty(b) for _ in range(2)) + tuple(np.empty((b, 3)) for _ in range(2))
+    scratch = (np.empty(b), np.empty(b), np.empty(b), np.empty(b, dtype=np.int8))
+    fused.curvature_cga(search.points, xb, qb, indptr, indices, radius * BIAS_RATIO, blend,
+                        plan.fit[:6] + (True,) + plan.fit[7:], small + scratch, search.rank,
+                        *constraints)
     gain = clean_fraction(noise, BIAS_NOISE_SCALE * radius)
     # only where the smaller ball saw every direction the larger one did: where a sparse or
     # clumpy sampling leaves half-sets of the smaller ball empty, its fit is no measurement of
     # the bias (clumpy torus: max |dk| 0.39 -> 1.7 with the correction applied there)
-    gain = np.where(small[4] >= large_samples, gain, 0.0)
+    gain = np.where(scratch[0] >= large_samples, gain, 0.0)
     if plan.normals == "given" and not plan.refine:
         # normals used as given may be noisy: their tilt from the local quadric's normal
         # turns into an uneven error of the smaller fit's half-sets that the extrapolation
         # doubles (benchmark clouds, clean points, normal noise 0.1: mean |dH| 0.006 -> 0.018)
         gain = gain * clean_fraction(_tilt(search, xb, qb, indptr, indices, radius,
-                                           point_weights, quadric), BIAS_TILT_SCALE)
-    return extrapolate_to_zero(large, small[:4], qb, gain)
+                                           constraints[-1], quadric), BIAS_TILT_SCALE)
+    return extrapolate_to_zero(large, small, qb, gain)
 
 
 def _tilt(search, xb, qb, indptr, indices, radius, point_weights, fitted=None):

@@ -123,7 +123,10 @@ def accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta, 
     neighbor's weight; neighbors of weight 0 are counted in the ball but join no half-set.
     """
     ca, sa = planes[0], planes[1]
-    _zero(acc)
+    ndir = ca.shape[0]
+    for k in range(2 * ndir):
+        for c in range(N_ACC):
+            acc[k, c] = 0.0
     n_nbr = 0
     # weighted sums over the ball's normal rows: weight, u, v, bu, bv (the means c and nbar)
     sw, su, sv, sbu, sbv = 0.0, 0.0, 0.0, 0.0, 0.0
@@ -135,109 +138,32 @@ def accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta, 
         pw = 1.0 if point_weights is None else point_weights[nbr[j]]
         if pw <= 0.0:
             continue
-        has_normal, w, u, v, bu, bv = _add_neighbor(acc, qx, qy, qz, r2, n, tu, tv, beta, ca,
-                                                    sa, slab, point_normals, nbr[j], pw)
-        if has_normal:
-            sw += w
-            su += w * u
-            sv += w * v
-            sbu += w * bu
-            sbv += w * bv
+        u = qx * tu[0] + qy * tu[1] + qz * tu[2]
+        v = qx * tv[0] + qy * tv[1] + qz * tv[2]
+        h = qx * n[0] + qy * n[1] + qz * n[2]
+        bu, bv, has_normal = 0.0, 0.0, False
+        if point_normals is not None:
+            p = nbr[j]
+            sgn = 1.0
+            if (point_normals[p, 0] * n[0] + point_normals[p, 1] * n[1]
+                    + point_normals[p, 2] * n[2]) < 0.0:
+                sgn = -1.0
+            bu = sgn * (point_normals[p, 0] * tu[0] + point_normals[p, 1] * tu[1]
+                        + point_normals[p, 2] * tu[2])
+            bv = sgn * (point_normals[p, 0] * tv[0] + point_normals[p, 1] * tv[1]
+                        + point_normals[p, 2] * tv[2])
+            has_normal = np.isfinite(bu + bv) and u * u + v * v > 0.0
+            if has_normal:
+                w = ((1.0 - beta) + beta * (1.0 - r2) ** WEIGHT_POWER) * pw
+                sw += w
+                su += w * u
+                sv += w * v
+                sbu += w * bu
+                sbv += w * bv
+        add_point(acc, u, v, h, r2, beta, ca, sa, slab, bu, bv, has_normal, pw)
     if sw > 0.0:
         center_normal_rows(acc, ca, sa, su / sw, sv / sw, sbu / sw, sbv / sw)
     return n_nbr
-
-
-@njit(cache=True)
-def accumulate_two_half_sets(points, nbr, lo, hi, x, n, frames, radii, beta, planes, slabs,
-                             accs, point_normals=None, point_weights=None):
-    """:func:`accumulate_half_sets` for two balls about x at once, from one pass over the list.
-
-    ``frames`` ``(tu, tv, tu_small, tv_small)``, ``radii`` ``(r2max, inv_r, r2max_small,
-    inv_r_small)``, ``slabs`` ``(slab, slab_small)`` and ``accs`` ``(acc, acc_small)``: the
-    arguments of the two calls, the second ball's squared radius ``r2max_small <= r2max``.
-    A neighbor within the smaller ball adds to both sets of half-sets, each in its own frame and
-    units, in the order of the list as the single calls do: the sums are those of two calls, bit
-    for bit. Returns the numbers of neighbors in both balls.
-    """
-    tu, tv, tus, tvs = frames
-    r2max, inv_r, r2s, inv_rs = radii
-    acc, acc_small = accs
-    ca, sa = planes[0], planes[1]
-    _zero(acc)
-    _zero(acc_small)
-    n_nbr = 0
-    n_small = 0
-    sw, su, sv, sbu, sbv = 0.0, 0.0, 0.0, 0.0, 0.0
-    sw_s, su_s, sv_s, sbu_s, sbv_s = 0.0, 0.0, 0.0, 0.0, 0.0
-    for j in range(lo, hi):
-        inside, qx, qy, qz, r2 = ball_offset(points, nbr[j], x[0], x[1], x[2], r2max, inv_r)
-        if not inside:
-            continue
-        n_nbr += 1
-        small, px, py, pz, p2 = ball_offset(points, nbr[j], x[0], x[1], x[2], r2s, inv_rs)
-        if small:
-            n_small += 1
-        pw = 1.0 if point_weights is None else point_weights[nbr[j]]
-        if pw <= 0.0:
-            continue
-        has_normal, w, u, v, bu, bv = _add_neighbor(acc, qx, qy, qz, r2, n, tu, tv, beta, ca,
-                                                    sa, slabs[0], point_normals, nbr[j], pw)
-        if has_normal:
-            sw += w
-            su += w * u
-            sv += w * v
-            sbu += w * bu
-            sbv += w * bv
-        if not small:
-            continue
-        has_normal, w, u, v, bu, bv = _add_neighbor(acc_small, px, py, pz, p2, n, tus, tvs, beta,
-                                                    ca, sa, slabs[1], point_normals, nbr[j], pw)
-        if has_normal:
-            sw_s += w
-            su_s += w * u
-            sv_s += w * v
-            sbu_s += w * bu
-            sbv_s += w * bv
-    if sw > 0.0:
-        center_normal_rows(acc, ca, sa, su / sw, sv / sw, sbu / sw, sbv / sw)
-    if sw_s > 0.0:
-        center_normal_rows(acc_small, ca, sa, su_s / sw_s, sv_s / sw_s, sbu_s / sw_s,
-                           sbv_s / sw_s)
-    return n_nbr, n_small
-
-
-@njit(cache=True)
-def _zero(acc):
-    for k in range(acc.shape[0]):
-        for c in range(N_ACC):
-            acc[k, c] = 0.0
-
-
-@njit(cache=True)
-def _add_neighbor(acc, qx, qy, qz, r2, n, tu, tv, beta, ca, sa, slab, point_normals, p, pw):
-    """Add neighbor row ``p`` at offset (qx, qy, qz) from x (units of the radius, ``r2`` its
-    squared length) and of weight ``pw`` to the half-sets of ``acc`` in the frame (tu, tv, n),
-    with its normal row where ``point_normals`` has one. Returns ``(has_normal, w, u, v, bu,
-    bv)``, what the ball's normal-row means sum."""
-    u = qx * tu[0] + qy * tu[1] + qz * tu[2]
-    v = qx * tv[0] + qy * tv[1] + qz * tv[2]
-    h = qx * n[0] + qy * n[1] + qz * n[2]
-    bu, bv, has_normal, w = 0.0, 0.0, False, 0.0
-    if point_normals is not None:
-        sgn = 1.0
-        if (point_normals[p, 0] * n[0] + point_normals[p, 1] * n[1]
-                + point_normals[p, 2] * n[2]) < 0.0:
-            sgn = -1.0
-        bu = sgn * (point_normals[p, 0] * tu[0] + point_normals[p, 1] * tu[1]
-                    + point_normals[p, 2] * tu[2])
-        bv = sgn * (point_normals[p, 0] * tv[0] + point_normals[p, 1] * tv[1]
-                    + point_normals[p, 2] * tv[2])
-        has_normal = np.isfinite(bu + bv) and u * u + v * v > 0.0
-        if has_normal:
-            w = ((1.0 - beta) + beta * (1.0 - r2) ** WEIGHT_POWER) * pw
-    add_point(acc, u, v, h, r2, beta, ca, sa, slab, bu, bv, has_normal, pw)
-    return has_normal, w, u, v, bu, bv
 
 
 @njit(cache=True)

@@ -13,15 +13,14 @@ import numpy as np
 from numba import njit, prange
 
 from ..linalg import CHUNK
-from .circle import (N_ACC, accumulate_half_sets, accumulate_two_half_sets, half_set_samples,
-                     normal_row_weight)
+from .circle import N_ACC, accumulate_half_sets, half_set_samples, normal_row_weight
 from .constants import (MIN_DIRECTION_SPREAD, PLANE_OFFSET, STATUS_DEGENERATE_DIRECTIONS,
                         STATUS_ILL_POSED_FIT, STATUS_NO_NORMAL, STATUS_NO_POSITION, STATUS_OK,
                         STATUS_TOO_FEW_HALF_SETS, STATUS_TOO_FEW_NEIGHBORS)
 from .euler import direction_spread, euler_residual, robust_euler_fit
 from .frame import tangent_frame
 
-__all__ = ["curvature_cga", "estimate_one", "estimate_two", "sampling_planes", "cache_is_warm"]
+__all__ = ["curvature_cga", "estimate_one", "sampling_planes", "cache_is_warm"]
 
 
 @njit(cache=True)
@@ -55,64 +54,17 @@ def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, wo
     (:class:`meshcurv.result.Status`). An estimate needs 3 planes and 5 circle fits, a
     well-posed Euler fit and measured directions spread by ``MIN_DIRECTION_SPREAD``.
     """
-    slab = opts[1]
-    ca, sa = planes[0], planes[1]
-    acc = work[0]
+    ndir, slab, min_points, min_spread, unit_norm, corrected, half_frequency, robust = opts
+    ca, sa, dirs = planes
+    acc, kappa, rows, active, scratch, mat, rhs, sol, b3, ev, mix = work
     inv_r = 1.0 / radius
     r2max = radius * radius
     tangent_frame(points, nbr, lo, hi, x, n, r2max, tu, tv, rank, point_weights)
     n_nbr = accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta,
                                  (ca, sa), slab, acc, point_normals,
                                  point_weights)
-    return _fit_half_sets(acc, n_nbr, radius, opts, planes[2], work, point_normals is not None,
-                          noise, normal_gain)
-
-
-@njit(cache=True)
-def estimate_two(points, nbr, lo, hi, x, n, rank, radii, beta, opts_pair, planes, work,
-                 acc_small, frames, point_normals=None, noise=np.nan, normal_gain=1.0,
-                 point_weights=None):
-    """:func:`estimate_one` at two radii about x, ``radii = (radius, small_radius)`` with
-    ``small_radius <= radius``, from one pass over the neighbor list
-    (:func:`meshcurv.fit.circle.accumulate_two_half_sets`).
-
-    ``opts_pair`` the two fits' ``opts`` (the same ``ndir``: ``planes`` serve both);
-    ``acc_small`` (2 ndir, N_ACC) the smaller ball's accumulators, the other scratch of
-    ``work`` serves both fits in turn; ``frames`` ``(tu, tv, tu_small, tv_small)`` outputs.
-    Returns the two fits' tuples, each bit for bit that of :func:`estimate_one` at its radius.
-    """
-    radius, small_radius = radii
-    opts, small_opts = opts_pair
-    ca, sa = planes[0], planes[1]
-    tu, tv, tus, tvs = frames
-    acc = work[0]
-    inv_r = 1.0 / radius
-    r2max = radius * radius
-    inv_rs = 1.0 / small_radius
-    r2s = small_radius * small_radius
-    tangent_frame(points, nbr, lo, hi, x, n, r2max, tu, tv, rank, point_weights)
-    tangent_frame(points, nbr, lo, hi, x, n, r2s, tus, tvs, rank, point_weights)
-    n_nbr, n_small = accumulate_two_half_sets(points, nbr, lo, hi, x, n, frames,
-                                              (r2max, inv_r, r2s, inv_rs), beta, (ca, sa),
-                                              (opts[1], small_opts[1]), (acc, acc_small),
-                                              point_normals, point_weights)
-    with_normals = point_normals is not None
-    large = _fit_half_sets(acc, n_nbr, radius, opts, planes[2], work, with_normals, noise,
-                           normal_gain)
-    small = _fit_half_sets(acc_small, n_small, small_radius, small_opts, planes[2], work,
-                           with_normals, noise, normal_gain)
-    return large, small
-
-
-@njit(cache=True)
-def _fit_half_sets(acc, n_nbr, radius, opts, dirs, work, with_normals, noise, normal_gain):
-    """The circle fits of the filled accumulators ``acc`` and the Euler fit: the result tuple
-    of :func:`estimate_one` (``work``'s scratch other than its accumulators is used)."""
-    ndir, slab, min_points, min_spread, unit_norm, corrected, half_frequency, robust = opts
-    _, kappa, rows, active, scratch, mat, rhs, sol, b3, ev, mix = work
-    inv_r = 1.0 / radius
     mu = 0.0
-    if with_normals:
+    if point_normals is not None:
         mu = normal_gain * normal_row_weight(acc, ndir, min_points, min_spread,
                                              (noise * inv_r) * (noise * inv_r))
     m, planes_seen = half_set_samples(acc, ndir, min_points, min_spread, unit_norm, corrected,
@@ -170,7 +122,7 @@ def _write_directions(q, theta1, tu, tv, n, d1, d2):
 @njit(parallel=True, cache=True)
 def curvature_cga(points, query_points, query_normals, indptr, indices, radius, blend, opts,
                   out, rank=None, point_normals=None, noise=None, normal_gain=None,
-                  point_weights=None, small_radius=np.nan, small_opts=None, small_out=None):
+                  point_weights=None):
     """Fused CGA circle-fit estimator over query points with CSR neighbor lists.
 
     Parameters
@@ -204,11 +156,8 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
     point_weights : (n,) float64 in [0, 1], optional, per row of ``points``: multiplies each
         neighbor's weight in the circle fits (the outlier pass's weights,
         :func:`meshcurv.fit.outliers.outlier_weight`); default 1.
-    small_radius, small_opts, small_out : optional, a second fit at ``small_radius <=
-        radius`` (model units) over the same lists, weights and normals, with its own ``opts``
-        (the same ``ndir``), written into ``small_out`` as ``out`` is; both fits come from one
-        pass over each list (:func:`estimate_two`), bit for bit those of two calls.
     """
+    k1, k2, d1, d2, n_samples, residual, n_neighbors, status = out
     ndir = opts[0]
     m = query_points.shape[0]
     nh = 2 * ndir
@@ -218,76 +167,48 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
         work = (np.empty((nh, N_ACC)), np.empty(nh), np.empty((nh, 5)), np.empty(nh),
                 np.empty(nh), np.empty((5, 5)), np.empty(5), np.empty(5), np.empty((3, 3)),
                 np.empty(3), np.empty((nh, 2)))
-        acc_small = np.empty((nh, N_ACC))
         tu = np.empty(3)
         tv = np.empty(3)
-        tus = np.empty(3)
-        tvs = np.empty(3)
         x = np.empty(3)
         n = np.empty(3)
         for q in range(c * CHUNK, min(m, (c + 1) * CHUNK)):
             for a in range(3):
                 x[a] = query_points[q, a]
                 n[a] = query_normals[q, a]
-            fit = (np.nan, np.nan, np.nan, 0, np.nan, 0, STATUS_NO_POSITION)
-            small_fit = fit
+            e1, e2, theta1, used, rms, n_nbr = np.nan, np.nan, np.nan, 0, np.nan, 0
+            why = STATUS_NO_POSITION
             nn = math.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
             if np.isfinite(x[0] + x[1] + x[2]):
-                fit = (np.nan, np.nan, np.nan, 0, np.nan, 0, STATUS_NO_NORMAL)
-                small_fit = fit
+                why = STATUS_NO_NORMAL
             if nn > 0.0 and np.isfinite(nn) and np.isfinite(x[0] + x[1] + x[2]):
                 for a in range(3):
                     n[a] /= nn
-                if small_out is None:
-                    if point_normals is None:
-                        fit = estimate_one(
-                            points, indices, indptr[q], indptr[q + 1], x, n, rank, radius,
-                            blend[q], opts, planes, work, tu, tv, None, np.nan, 1.0,
-                            point_weights)
-                    else:
-                        fit = estimate_one(
-                            points, indices, indptr[q], indptr[q + 1], x, n, rank, radius,
-                            blend[q], opts, planes, work, tu, tv, point_normals, noise[q],
-                            normal_gain[q], point_weights)
+                if point_normals is None:
+                    e1, e2, theta1, used, rms, n_nbr, why = estimate_one(
+                        points, indices, indptr[q], indptr[q + 1], x, n, rank, radius,
+                        blend[q], opts, planes, work, tu, tv, None, np.nan, 1.0,
+                        point_weights)
                 else:
-                    if point_normals is None:
-                        fit, small_fit = estimate_two(
-                            points, indices, indptr[q], indptr[q + 1], x, n, rank,
-                            (radius, small_radius), blend[q], (opts, small_opts), planes, work,
-                            acc_small, (tu, tv, tus, tvs), None, np.nan, 1.0, point_weights)
-                    else:
-                        fit, small_fit = estimate_two(
-                            points, indices, indptr[q], indptr[q + 1], x, n, rank,
-                            (radius, small_radius), blend[q], (opts, small_opts), planes, work,
-                            acc_small, (tu, tv, tus, tvs), point_normals, noise[q],
-                            normal_gain[q], point_weights)
-            _write_row(q, fit, tu, tv, n, out)
-            if small_out is not None:
-                _write_row(q, small_fit, tus, tvs, n, small_out)
-
-
-@njit(cache=True)
-def _write_row(q, fit, tu, tv, n, out):
-    """One query point's result tuple (:func:`estimate_one`) into row q of ``out`` (see
-    :func:`curvature_cga`)."""
-    k1, k2, d1, d2, n_samples, residual, n_neighbors, status = out
-    e1, e2, theta1, used, rms, n_nbr, why = fit
-    if why == STATUS_OK and not np.isfinite(e1):
-        why = STATUS_ILL_POSED_FIT
-    status[q] = why
-    n_samples[q] = used
-    residual[q] = rms
-    n_neighbors[q] = n_nbr
-    if np.isfinite(e1):
-        k1[q] = e1
-        k2[q] = e2
-        _write_directions(q, theta1, tu, tv, n, d1, d2)
-    else:
-        k1[q] = np.nan
-        k2[q] = np.nan
-        for a in range(3):
-            d1[q, a] = np.nan
-            d2[q, a] = np.nan
+                    e1, e2, theta1, used, rms, n_nbr, why = estimate_one(
+                        points, indices, indptr[q], indptr[q + 1], x, n, rank, radius,
+                        blend[q], opts, planes, work, tu, tv, point_normals, noise[q],
+                        normal_gain[q], point_weights)
+            if why == STATUS_OK and not np.isfinite(e1):
+                why = STATUS_ILL_POSED_FIT
+            status[q] = why
+            n_samples[q] = used
+            residual[q] = rms
+            n_neighbors[q] = n_nbr
+            if np.isfinite(e1):
+                k1[q] = e1
+                k2[q] = e2
+                _write_directions(q, theta1, tu, tv, n, d1, d2)
+            else:
+                k1[q] = np.nan
+                k2[q] = np.nan
+                for a in range(3):
+                    d1[q, a] = np.nan
+                    d2[q, a] = np.nan
 
 
 def cache_is_warm():

@@ -491,8 +491,13 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2
     b = len(xb)
     noise = np.empty(b)
     start = qb.copy() if plan.refine else None
+    # normals used as given: the bias correction's tilt test needs the quadric's normal about
+    # them, from the same fits as the noise
+    quadric = np.empty((b, 3)) if (plan.bias_correction and plan.normals == "given"
+                                   and not plan.refine) else None
     jet.local_jet(search.points, xb, qb, indptr, indices, radius,
-                  plan.refine and plan.normal_fit != "sphere", noise, point_weights)
+                  (plan.refine and plan.normal_fit != "sphere") or quadric is not None, noise,
+                  point_weights, quadric)
     beta = weight_blend(noise, radius, "auto")
     by_sphere = plan.refine and plan.normal_fit != "quadric"
     if by_sphere or given_a2 > 0:
@@ -500,6 +505,7 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2
         fitted = _oriented_like(fitted, qb)
         if not by_sphere:
             qb = mix_given_normals(qb, fitted, tilt_gain, noise, radius, given_a2)
+            quadric = None     # fitted about the normals before the mix
         elif plan.normal_fit == "sphere":
             qb = fitted
         else:
@@ -521,21 +527,22 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2
     if plan.bias_correction:
         k1, k2, d1, d2 = _bias_corrected(search, xb, qb, indptr, indices, radius, blend, plan,
                                          (k1, k2, d1, d2), noise, constraints + (point_weights,),
-                                         samples)
+                                         samples, quadric)
     out.k1[pos], out.k2[pos], out.d1[pos], out.d2[pos] = k1, k2, d1, d2
     out.normals[pos], out.n_samples[pos], out.residual[pos] = qb, samples, residual
     out.n_neighbors[pos], out.noise[pos], out.status[pos] = nbrs, noise, status
 
 
 def _bias_corrected(search, xb, qb, indptr, indices, radius, blend, plan, large, noise,
-                    constraints, large_samples):
+                    constraints, large_samples, quadric=None):
     """``large`` (k1, k2, d1, d2) at ``radius`` extrapolated to radius 0 with a second fit over
     the same lists within ``BIAS_RATIO * radius`` (same normals, normal ``constraints`` and
     point weights (the last four arguments of :func:`meshcurv.fit.fused.curvature_cga`) and
     weight profile; the
     half-frequency Euler model, which absorbs what a tilted normal does to opposite half-sets
     of a smaller, more unevenly filled ball), mixed in by the measured ``noise``
-    (:func:`clean_fraction` at :data:`BIAS_NOISE_SCALE`)."""
+    (:func:`clean_fraction` at :data:`BIAS_NOISE_SCALE`). ``quadric``: the local quadric's
+    normals about ``qb`` (see :func:`_tilt`) where already fitted, else None."""
     b = len(xb)
     small = tuple(np.empty(b) for _ in range(2)) + tuple(np.empty((b, 3)) for _ in range(2))
     scratch = (np.empty(b), np.empty(b), np.empty(b), np.empty(b, dtype=np.int8))
@@ -552,16 +559,18 @@ def _bias_corrected(search, xb, qb, indptr, indices, radius, blend, plan, large,
         # turns into an uneven error of the smaller fit's half-sets that the extrapolation
         # doubles (benchmark clouds, clean points, normal noise 0.1: mean |dH| 0.006 -> 0.018)
         gain = gain * clean_fraction(_tilt(search, xb, qb, indptr, indices, radius,
-                                           constraints[-1]), BIAS_TILT_SCALE)
+                                           constraints[-1], quadric), BIAS_TILT_SCALE)
     return extrapolate_to_zero(large, small, qb, gain)
 
 
-def _tilt(search, xb, qb, indptr, indices, radius, point_weights):
+def _tilt(search, xb, qb, indptr, indices, radius, point_weights, fitted=None):
     """Angle (radians, (b,)) between the unit normals ``qb`` and the normals of the local
-    quadric fitted around them (:func:`meshcurv.fit.jet.local_jet`); NaN where it has none."""
-    fitted = qb.copy()
-    jet.local_jet(search.points, xb, fitted, indptr, indices, radius, True, np.empty(len(xb)),
-                  point_weights)
+    quadric fitted around them (:func:`meshcurv.fit.jet.local_jet`, its ``refined`` output;
+    ``fitted`` when already computed); NaN where it has none."""
+    if fitted is None:
+        fitted = np.empty_like(qb)
+        jet.local_jet(search.points, xb, qb, indptr, indices, radius, True, np.empty(len(xb)),
+                      point_weights, fitted)
     cos = np.clip(np.einsum("ij,ij->i", fitted, qb), -1.0, 1.0)
     return np.where(np.isfinite(cos), np.arccos(cos), np.nan)
 

@@ -35,7 +35,7 @@ def _add_monomials(moments, c, u, v, degree):
 
 @njit(parallel=True, cache=True)
 def local_jet(points, query_points, normals, indptr, indices, radius, refine, noise,
-              point_weights=None):
+              point_weights=None, refined=None):
     """Local height fits around each query point: noise level (quartic) and normal (quadric).
 
     In a frame (tu, tv, n) around each query point x, the heights of its neighbors within
@@ -52,7 +52,7 @@ def local_jet(points, query_points, normals, indptr, indices, radius, refine, no
     Parameters
     ----------
     points : (n, 3) float64; query_points : (m, 3) float64
-    normals : (m, 3) float64, unit; refined in place when ``refine``
+    normals : (m, 3) float64, unit; refined in place when ``refine`` (unless ``refined``)
     indptr, indices : CSR neighbor lists into ``points``; radius : float, model units
     refine : bool
     noise : (m,) float64 output, RMS height residual of the quartic fit, or of the cubic where
@@ -62,6 +62,9 @@ def local_jet(points, query_points, normals, indptr, indices, radius, refine, no
         e.g. at a crease).
     point_weights : (n,) float64 in [0, 1], optional: each neighbor's weight is multiplied by
         it (the outlier pass's weights); neighbors of weight 0 are left out.
+    refined : (m, 3) float64 output, optional: with ``refine``, where the refined normals go
+        (a copy of ``normals`` where they are left unchanged), ``normals`` then left as given;
+        the same fits give the noise, so one pass yields both.
     """
     m = query_points.shape[0]
     r2max = radius * radius
@@ -77,6 +80,9 @@ def local_jet(points, query_points, normals, indptr, indices, radius, refine, no
         hmom = np.empty((9, 9))
         for q in range(c * CHUNK, min(m, (c + 1) * CHUNK)):
             noise[q] = np.nan
+            if refined is not None:
+                for a in range(3):
+                    refined[q, a] = normals[q, a]
             n0 = normals[q, 0]
             n1 = normals[q, 1]
             n2 = normals[q, 2]
@@ -151,6 +157,11 @@ def local_jet(points, query_points, normals, indptr, indices, radius, refine, no
             g1 = n1 - sol[3] * t1 - sol[4] * b1
             g2 = n2 - sol[3] * t2 - sol[4] * b2
             s = 1.0 / math.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
-            normals[q, 0] = g0 * s
-            normals[q, 1] = g1 * s
-            normals[q, 2] = g2 * s
+            if refined is None:
+                normals[q, 0] = g0 * s
+                normals[q, 1] = g1 * s
+                normals[q, 2] = g2 * s
+            else:
+                refined[q, 0] = g0 * s
+                refined[q, 1] = g1 * s
+                refined[q, 2] = g2 * s

@@ -21,7 +21,8 @@ def local_jet(x, n, neighbors, radius, point_weights=None):
     Returns
     -------
     normal : (3,) float, unit normal of the fitted quadric at x, on n's side; n itself when a
-        fit is singular or the quadric would tilt it by more than 30 degrees
+        fit is singular or the quadric would tilt it by more than 30 degrees (the kernel's
+        refined normal, in place or in its ``refined`` output)
     noise : float, RMS height residual of the quartic fit (15 coefficients), or of the cubic
         (10) where the quartic is singular or 15 points are all there is, model units,
         corrected for the coefficients; NaN when both are singular

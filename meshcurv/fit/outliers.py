@@ -13,7 +13,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from ..linalg import CHUNK, ball_offset, smallest_eigvec_jacobi3, solve_sym
+from ..linalg import CHUNK, ball_offset, select_median, smallest_eigvec_jacobi3, solve_sym
 from .constants import OUTLIER_ITERATIONS, OUTLIER_SCALE_FLOOR, OUTLIER_TRUSTED, TUKEY_C
 from .jet import _add_monomials
 
@@ -113,9 +113,10 @@ def _height(sol, p, u, v):
 
 
 @njit(cache=True)
-def _moments(uvh, wd, wr, k, mom, hmom):
+def _moments(uvh, wd, wr, k, mom, hmom, degree=6):
     """Power moments of the weights ``w = wd wr`` over the k points ``uvh[:k]``:
-    ``mom[a, b] = sum w u^a v^b`` (a + b <= 6), ``hmom`` the same of ``w h`` (a + b <= 3)."""
+    ``mom[a, b] = sum w u^a v^b`` (a + b <= ``degree``: 6 for the cubic, 4 for the quadric, 2
+    for the plane), ``hmom`` the same of ``w h`` (a + b <= ``degree // 2``); the others 0."""
     for a in range(7):
         for b in range(7):
             mom[a, b] = 0.0
@@ -123,8 +124,167 @@ def _moments(uvh, wd, wr, k, mom, hmom):
     for i in range(k):
         w = wd[i] * wr[i]
         if w > 0.0:
-            _add_monomials(mom, w, uvh[i, 0], uvh[i, 1], 6)
-            _add_monomials(hmom, w * uvh[i, 2], uvh[i, 0], uvh[i, 1], 3)
+            _add_monomials(mom, w, uvh[i, 0], uvh[i, 1], degree)
+            _add_monomials(hmom, w * uvh[i, 2], uvh[i, 0], uvh[i, 1], degree // 2)
+
+
+@njit(cache=True)
+def _cubic_moments(q3, frame, wd, wr, k, uvh, mom, hmom):
+    """The offsets ``q3[:k]`` in the rows of ``frame`` (``uvh[:k]``: u, v, h) and their moments
+    for the cubic, in one pass: those of :func:`_moments` with the same products summed in the
+    same order (bit for bit), held in local accumulators (entries of ``mom`` would be loaded and
+    stored again for every neighbor)."""
+    f00, f01, f02 = frame[0, 0], frame[0, 1], frame[0, 2]
+    f10, f11, f12 = frame[1, 0], frame[1, 1], frame[1, 2]
+    f20, f21, f22 = frame[2, 0], frame[2, 1], frame[2, 2]
+    m00 = m01 = m02 = m03 = m04 = m05 = m06 = 0.0
+    m10 = m11 = m12 = m13 = m14 = m15 = 0.0
+    m20 = m21 = m22 = m23 = m24 = 0.0
+    m30 = m31 = m32 = m33 = 0.0
+    m40 = m41 = m42 = 0.0
+    m50 = m51 = 0.0
+    m60 = 0.0
+    h00 = h01 = h02 = h03 = 0.0
+    h10 = h11 = h12 = 0.0
+    h20 = h21 = 0.0
+    h30 = 0.0
+    for i in range(k):
+        x, y, z = q3[i, 0], q3[i, 1], q3[i, 2]
+        u = x * f00 + y * f01 + z * f02
+        v = x * f10 + y * f11 + z * f12
+        h = x * f20 + y * f21 + z * f22
+        uvh[i, 0] = u
+        uvh[i, 1] = v
+        uvh[i, 2] = h
+        c = wd[i] * wr[i]
+        if not c > 0.0:
+            continue
+        # w u^a v^b as _add_monomials forms it: ((w u) ... u) v ... v
+        cu = c
+        t = cu
+        m00 += t
+        t *= v
+        m01 += t
+        t *= v
+        m02 += t
+        t *= v
+        m03 += t
+        t *= v
+        m04 += t
+        t *= v
+        m05 += t
+        t *= v
+        m06 += t
+        cu *= u
+        t = cu
+        m10 += t
+        t *= v
+        m11 += t
+        t *= v
+        m12 += t
+        t *= v
+        m13 += t
+        t *= v
+        m14 += t
+        t *= v
+        m15 += t
+        cu *= u
+        t = cu
+        m20 += t
+        t *= v
+        m21 += t
+        t *= v
+        m22 += t
+        t *= v
+        m23 += t
+        t *= v
+        m24 += t
+        cu *= u
+        t = cu
+        m30 += t
+        t *= v
+        m31 += t
+        t *= v
+        m32 += t
+        t *= v
+        m33 += t
+        cu *= u
+        t = cu
+        m40 += t
+        t *= v
+        m41 += t
+        t *= v
+        m42 += t
+        cu *= u
+        t = cu
+        m50 += t
+        t *= v
+        m51 += t
+        cu *= u
+        t = cu
+        m60 += t
+        cu = c * h
+        t = cu
+        h00 += t
+        t *= v
+        h01 += t
+        t *= v
+        h02 += t
+        t *= v
+        h03 += t
+        cu *= u
+        t = cu
+        h10 += t
+        t *= v
+        h11 += t
+        t *= v
+        h12 += t
+        cu *= u
+        t = cu
+        h20 += t
+        t *= v
+        h21 += t
+        cu *= u
+        t = cu
+        h30 += t
+    mom[0, 0] = m00
+    mom[0, 1] = m01
+    mom[0, 2] = m02
+    mom[0, 3] = m03
+    mom[0, 4] = m04
+    mom[0, 5] = m05
+    mom[0, 6] = m06
+    mom[1, 0] = m10
+    mom[1, 1] = m11
+    mom[1, 2] = m12
+    mom[1, 3] = m13
+    mom[1, 4] = m14
+    mom[1, 5] = m15
+    mom[2, 0] = m20
+    mom[2, 1] = m21
+    mom[2, 2] = m22
+    mom[2, 3] = m23
+    mom[2, 4] = m24
+    mom[3, 0] = m30
+    mom[3, 1] = m31
+    mom[3, 2] = m32
+    mom[3, 3] = m33
+    mom[4, 0] = m40
+    mom[4, 1] = m41
+    mom[4, 2] = m42
+    mom[5, 0] = m50
+    mom[5, 1] = m51
+    mom[6, 0] = m60
+    hmom[0, 0] = h00
+    hmom[0, 1] = h01
+    hmom[0, 2] = h02
+    hmom[0, 3] = h03
+    hmom[1, 0] = h10
+    hmom[1, 1] = h11
+    hmom[1, 2] = h12
+    hmom[2, 0] = h20
+    hmom[2, 1] = h21
+    hmom[3, 0] = h30
 
 
 @njit(cache=True)
@@ -138,11 +298,11 @@ def _normal_equations(mom, hmom, p, mat, rhs):
 
 
 @njit(cache=True)
-def _biweight_scale(res, k):
-    """Biweight midvariance scale of the residuals ``res[:k]`` (about 0): with
-    ``u = e / (9 MAD)``, ``sqrt(k sum_{|u|<1} e^2 (1 - u^2)^4) / |sum_{|u|<1} (1 - u^2)(1 - 5 u^2)|``;
+def _biweight_scale(res, k, mad):
+    """Biweight midvariance scale of the residuals ``res[:k]`` (about 0) with ``mad`` their
+    median: with ``u = e / (9 MAD)``,
+    ``sqrt(k sum_{|u|<1} e^2 (1 - u^2)^4) / |sum_{|u|<1} (1 - u^2)(1 - 5 u^2)|``;
     0 where the MAD is."""
-    mad = np.median(res[:k])
     if not mad > 0.0:
         return 0.0
     num = 0.0
@@ -200,6 +360,7 @@ def point_residuals(points, query_points, indptr, indices, radius, residual, sca
         wd = np.empty(most)
         wr = np.empty(most)
         res = np.empty(most)
+        ordered = np.empty(most)          # res reordered by the median's selection
         mat = np.empty((10, 10))
         rhs = np.empty(10)
         sol = np.empty(10)
@@ -234,23 +395,29 @@ def point_residuals(points, query_points, indptr, indices, radius, residual, sca
                 continue
             ok = True
             s = 0.0
+            mad = 0.0
             coefficients = math.sqrt(k / (k - p))
             for it in range(iterations + 1):
                 # the frame's plane is refitted with the robust weights too: stray points
                 # tilt it most where the ball holds few points
                 _pca_frame(q3, wr, k, frame, cov, ev)
-                for i in range(k):
-                    for a in range(3):
-                        uvh[i, a] = (q3[i, 0] * frame[a, 0] + q3[i, 1] * frame[a, 1]
-                                     + q3[i, 2] * frame[a, 2])
-                _moments(uvh, wd, wr, k, mom, hmom)
+                if p == 10:
+                    _cubic_moments(q3, frame, wd, wr, k, uvh, mom, hmom)
+                else:
+                    for i in range(k):
+                        for a in range(3):
+                            uvh[i, a] = (q3[i, 0] * frame[a, 0] + q3[i, 1] * frame[a, 1]
+                                         + q3[i, 2] * frame[a, 2])
+                    _moments(uvh, wd, wr, k, mom, hmom, 4 if p == 6 else 2)
                 _normal_equations(mom, hmom, p, mat, rhs)
                 if not solve_sym(mat, rhs, p, sol):
                     ok = False
                     break
                 for i in range(k):
                     res[i] = abs(uvh[i, 2] - _height(sol, p, uvh[i, 0], uvh[i, 1]))
-                s = max(MAD_SIGMA * np.median(res[:k]) * coefficients, OUTLIER_SCALE_FLOOR)
+                    ordered[i] = res[i]
+                mad = select_median(ordered, k)
+                s = max(MAD_SIGMA * mad * coefficients, OUTLIER_SCALE_FLOOR)
                 if it == iterations:
                     break
                 for i in range(k):
@@ -260,7 +427,8 @@ def point_residuals(points, query_points, indptr, indices, radius, residual, sca
                 continue
             # the scale of the final fit's residuals: the biweight midvariance (Mosteller &
             # Tukey), as robust as the MAD and 87 % efficient at the Gaussian instead of 37 %
-            s = max(_biweight_scale(res, k) * coefficients, OUTLIER_SCALE_FLOOR)
+            # (mad: the median of these residuals, selected in the last round)
+            s = max(_biweight_scale(res, k, mad) * coefficients, OUTLIER_SCALE_FLOOR)
             # x's own noise adds to the fit's error at x: variance s^2 (1 + e^T A^-1 B A^-1 e)
             # with A, B the moments of the weights and of their squares, e the constant term
             fitted = sol[2]

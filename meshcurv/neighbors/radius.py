@@ -1,7 +1,10 @@
 """Default radius from the sampling density, and the power-of-two scaling that keeps squared
 lengths of any size representable in float64."""
 
+import math
+
 import numpy as np
+from numba import njit
 from scipy.spatial import cKDTree
 
 __all__ = ["default_radius", "power_of_two_scale", "typical_extent", "MAX_BALL_FRACTION"]
@@ -90,18 +93,35 @@ def default_radius(points, target_neighbors=100, sample=20000, seed=0, faces=Non
 def _ring_reach(points, faces, scale):
     """Median over the vertices of ``faces`` of their longest edge (model units; edges of NaN
     vertices left out; lengths measured on coordinates times the power of two ``scale``)."""
-    v = np.asarray(points, dtype=np.float64)
-    f = np.asarray(faces, dtype=np.int64)
-    a = np.concatenate([f[:, 0], f[:, 1], f[:, 2]])
-    b = np.concatenate([f[:, 1], f[:, 2], f[:, 0]])
-    with np.errstate(over="ignore", invalid="ignore"):
-        length = np.linalg.norm(v[a] * scale - v[b] * scale, axis=1) / scale
-    keep = np.isfinite(length)
-    longest = np.zeros(len(points))
-    np.maximum.at(longest, a[keep], length[keep])
-    np.maximum.at(longest, b[keep], length[keep])
-    used = longest[np.unique(np.concatenate([a[keep], b[keep]]))]
+    longest, used = _longest_edges(np.asarray(points, dtype=np.float64),
+                                   np.asarray(faces, dtype=np.int64), float(scale))
+    used = longest[used]
     return float(np.median(used)) if len(used) else 0.0
+
+
+@njit(cache=True)
+def _longest_edges(v, f, scale):
+    """``(longest, used)``, (n,) each: the length of each vertex's longest finite edge of the
+    triangles ``f`` (the norm of the difference of the coordinates times ``scale``, over
+    ``scale``), and whether it has one. One pass over the faces: a per-vertex maximum by
+    ``np.maximum.at`` and the used vertices by ``np.unique`` took 1.4 s at 250k vertices."""
+    longest = np.zeros(len(v))
+    used = np.zeros(len(v), dtype=np.bool_)
+    for t in range(f.shape[0]):
+        for e in range(3):
+            a = f[t, e]
+            b = f[t, (e + 1) % 3]
+            d0 = v[a, 0] * scale - v[b, 0] * scale
+            d1 = v[a, 1] * scale - v[b, 1] * scale
+            d2 = v[a, 2] * scale - v[b, 2] * scale
+            length = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) / scale
+            if not np.isfinite(length):
+                continue
+            longest[a] = max(longest[a], length)
+            longest[b] = max(longest[b], length)
+            used[a] = True
+            used[b] = True
+    return longest, used
 
 
 def _default_radius(p, target_neighbors, sample, seed):

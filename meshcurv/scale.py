@@ -37,6 +37,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from . import pipeline
+from .neighbors import power_of_two_scale, typical_extent
 from .result import Status
 
 __all__ = ["ladder", "select", "run_auto", "LADDER_EXPONENTS", "NOISE_GAIN", "MIN_SUPPORT",
@@ -113,10 +114,17 @@ def _smoothed(terms, points, k):
         return terms
     idx = np.flatnonzero(finite)
     k = min(k, len(idx))
-    _, nb = cKDTree(points[idx]).query(points[idx], k)
+    p = points[idx]
+    s = power_of_two_scale(typical_extent(p))
+    with np.errstate(over="ignore"):
+        # lengths whose squares overflow (underflow): on coordinates scaled by a power of two
+        p = p * s if s != 1.0 else p
+    _, nb = cKDTree(p).query(p, k)
+    missing = nb >= len(idx)      # neighbors at distances that still overflow (far points)
+    nb = np.where(missing, np.arange(len(idx))[:, None], nb)
     out = terms.copy()
     for t_in, t_out in zip(terms, out):
-        vals = t_in[idx][nb]
+        vals = np.where(missing, np.nan, t_in[idx][nb])
         with np.errstate(invalid="ignore"):
             cnt = np.isfinite(vals).sum(axis=1)
             mean = np.nansum(vals, axis=1) / np.maximum(cnt, 1)

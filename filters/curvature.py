@@ -197,6 +197,7 @@ def _store_result(ms, res, fields, quality, cmap, clamp):
     store_scalar(ms, "valid", res.valid.astype(np.float64))
     store_scalar(ms, "status", res.status.astype(np.float64))
     store_scalar(ms, "outlier_score", res.outlier_score)
+    store_scalar(ms, "radius_used", res.radius_used)
     store_point(ms, "d1", res.d1)
     store_point(ms, "d2", res.d2)
     # quality: NaN would break MeshLab's ramps and statistics, so invalid vertices read 0

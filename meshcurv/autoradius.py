@@ -1,4 +1,6 @@
-"""Automatic neighborhood radius from the sampling density, a noise estimate and a bias probe.
+"""One neighborhood radius for a whole input from the sampling density, a noise estimate and a
+bias probe (a function for users and scripts; ``radius="auto"`` of the estimator is the
+per-vertex scale of :mod:`meshcurv.scale`, which measures noise and bias at every vertex).
 
 The mean curvature error of the estimator at radius R is modelled as noise plus bias,
 
@@ -26,11 +28,12 @@ mean (|dk1| + |dk2|) / 2 = C sigma / (sqrt(rho) R^3) with C = 5.2 .. 5.7 for
 ``weighting="none"`` and C = 13.7 .. 17 for ``weighting="distance"`` (weights (1 - r^2/R^2)^4
 leave fewer effective points, so the same radius averages less noise away).
 
-Usage from the estimator (``radius="auto"``), with every option of that call except
-``min_points`` (here: the smallest ball)::
+Usage, with the options of the estimate it is for (``min_points`` is here the smallest
+ball)::
 
     radius = auto_radius(vertices, faces, normals=normals, weighting=weighting, slab=slab,
                          n_directions=n_directions, orientation=orientation, ...)
+    res = principal_curvatures(vertices, faces, normals=normals, radius=radius, ...)
 """
 
 import numpy as np

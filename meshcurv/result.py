@@ -13,7 +13,7 @@ __all__ = ["CurvatureResult", "Status", "CURVATURE_FIELDS", "curvature_fields"]
 
 # Per-vertex curvature fields of every annotated file (PLY properties, LAS extra bytes).
 CURVATURE_FIELDS = shape.FIELDS + ("valid", "status", "d1x", "d1y", "d1z", "d2x", "d2y", "d2z",
-                                   "outlier_score")
+                                   "outlier_score", "radius_used")
 
 
 class Status(IntEnum):
@@ -78,6 +78,11 @@ class CurvatureResult:
         neighborhood in robust noise scales (:mod:`meshcurv.fit.outliers`; above 4.685:
         ``Status.OUTLIER``); NaN where not computed (``robust_points=False``, too few
         neighbors), or None where the producer does not tell
+    radius_used : (n,) float64, the neighborhood radius of the row's estimate, model units:
+        ``radius`` for a fixed radius, the radius each vertex chose with ``radius="auto"``
+        (:mod:`meshcurv.scale`); NaN where ``valid`` is False. ``sparse_retry`` may have
+        widened the ball of a row that had too few points (its ``n_neighbors`` tells). None
+        where the producer does not tell (then ``radius`` where valid)
     """
 
     k1: np.ndarray
@@ -94,6 +99,7 @@ class CurvatureResult:
     status: np.ndarray = None
     orientation: str = None
     outlier_score: np.ndarray = None
+    radius_used: np.ndarray = None
 
     @property
     def mean(self):
@@ -123,7 +129,8 @@ def curvature_fields(result):
     """The :data:`CURVATURE_FIELDS` of a :class:`~meshcurv.CurvatureResult`, in that order, as
     ``{name: (n,) array}``: float64, ``valid`` uint8 (1 = estimated), ``status`` uint8
     (:class:`Status`), ``d1x .. d2z`` the components of the principal directions,
-    ``outlier_score`` float64 (NaN where not computed)."""
+    ``outlier_score`` float64 (NaN where not computed), ``radius_used`` float64 (model units,
+    NaN where not valid; ``radius`` where valid if the result does not tell)."""
     out = {f: np.asarray(getattr(result, f), dtype=np.float64) for f in shape.FIELDS}
     out["valid"] = np.asarray(result.valid, dtype=np.uint8)
     out["status"] = np.asarray(result.status, dtype=np.uint8)
@@ -134,4 +141,7 @@ def curvature_fields(result):
     score = result.outlier_score
     out["outlier_score"] = (np.full(len(result.k1), np.nan) if score is None else
                             np.asarray(score, dtype=np.float64))
+    used = result.radius_used
+    out["radius_used"] = (np.where(out["valid"] == 1, float(result.radius), np.nan)
+                          if used is None else np.asarray(used, dtype=np.float64))
     return out

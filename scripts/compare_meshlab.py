@@ -586,11 +586,19 @@ def _curvature_row(k1, k2, truth, mask):
                 max_dk=float(max_dk[ok].max()) if ok.any() else np.nan)
 
 
+def _radius_switch(radius, switches):
+    """(radius, Options switches) of a meshcurv run: ``--option radius=...`` (e.g. "auto")
+    replaces the case's radius of every meshcurv run."""
+    switches = dict(switches)
+    return switches.pop("radius", radius), switches
+
+
 def _run(method, v, f, radius, switches, timeout, normals=None):
     """One method on one input: dict(k1, k2, seconds, status, radius, valid_flags)."""
     import meshcurv
 
     if method == "meshcurv":
+        radius, switches = _radius_switch(radius, switches)
         t0 = time.perf_counter()
         res = meshcurv.principal_curvatures(v, f, normals=normals, radius=radius, **switches)
         return dict(k1=res.k1, k2=res.k2, seconds=time.perf_counter() - t0, status="ok",
@@ -685,11 +693,15 @@ def group_cnc(methods, size, switches, timeout, cnc_dir=None, **_):
             if se not in positions_done:
                 modes.append(("no normals", None, None))
                 positions_done.add(se)
+            rules = (("default", None), ("~50 points", r50))
+            if "radius" in switches:
+                rules = ((f"radius={switches['radius']}", None),)
             for mode, given, sigma_xi in modes:
-                for rule, radius in (("default", None), ("~50 points", r50)):
+                for rule, radius in rules:
+                    radius, options = _radius_switch(radius, switches)
                     t0 = time.perf_counter()
                     res = meshcurv.principal_curvatures(p, normals=given, radius=radius,
-                                                        **switches)
+                                                        **options)
                     dh = np.abs(res.mean - h_true)
                     ok = np.isfinite(dh)
                     rows.append(dict(group="cnc", file=name, sigma_eps=se, sigma_xi=sigma_xi,
@@ -853,8 +865,9 @@ def _cnc_tables(rows):
     """Markdown: mean |dH| averaged over the files per noise condition, then per file."""
     if not rows:
         return ["(not run: meshcurv not among the methods)", ""]
-    columns = [("meshcurv, normals", "default"), ("meshcurv, normals", "~50 points"),
-               ("meshcurv, no normals", "default"), ("meshcurv, no normals", "~50 points")]
+    # (method, radius rule) in the order run: normals before no normals
+    columns = sorted(dict.fromkeys((r["method"], r["radius_rule"]) for r in rows),
+                     key=lambda c: c[0].endswith("no normals"))
     grid = list(dict.fromkeys((r["sigma_eps"], r["sigma_xi"]) for r in rows
                               if r["sigma_xi"] is not None))
     n_files = len({r["file"] for r in rows})
@@ -985,7 +998,8 @@ def write_accuracy_report(path, results, command, seconds, switches):
              "`--option NAME=VALUE` passes a meshcurv switch, `--smallest` the test-suite "
              "sizes). Sign convention of every column: outward normal, convex positive, "
              "k1 >= k2.", "",
-             f"meshcurv: `principal_curvatures` with `{meshcurv.Options(**switches)!r}`"
+             f"meshcurv: `principal_curvatures` with "
+             f"`{meshcurv.Options(**_radius_switch(None, switches)[1])!r}`"
              + (f" (switches given: {switches})" if switches else " (its defaults)")
              + ", its default radius where a row says none. MeshLab (pymeshlab, one child "
              "process per call): Taubin (1-ring), QF (2-ring), SDQF (`scale` = the radius), "
@@ -1044,7 +1058,8 @@ def parse_switches(items):
 
     import meshcurv
 
-    fields = set(meshcurv.Options.__dataclass_fields__)
+    # radius: every meshcurv run's radius instead of the case's (e.g. radius=auto)
+    fields = set(meshcurv.Options.__dataclass_fields__) | {"radius"}
     switches = {}
     for item in items or ():
         name, sep, value = item.partition("=")
@@ -1407,7 +1422,8 @@ def main(argv=None):
                          "QF, SDQF, APSS) or single MeshLab methods (default: %(default)s)")
     ap.add_argument("--option", action="append", metavar="NAME=VALUE",
                     help="with --accuracy-cases: a meshcurv.Options switch for every meshcurv "
-                         "run (repeatable), e.g. --option weighting=none")
+                         "run (repeatable), e.g. --option weighting=none; radius=VALUE "
+                         "replaces every meshcurv run's radius (e.g. --option radius=auto)")
     ap.add_argument("--cnc-dir", default=None,
                     help="folder of the CNC benchmark clouds (default: $MESHCURV_CNC_DIR or "
                          "shared/bench/cnc beside the repository or a parent folder)")

@@ -259,12 +259,14 @@ def test_bad_shapes_and_indices_raise(vertices, faces, normals):
 
 
 def test_auto_radius_beats_the_default_radius_under_noise():
-    """radius="auto" widens the ball on a noisy torus (0.3 % of the diagonal) and cuts the error."""
+    """radius="auto" widens the balls on a noisy torus (0.3 % of the diagonal) and cuts the
+    error (per-vertex scale: 1.41 times the default radius, within the tube's curvature)."""
     t = surfaces.torus()
     noisy = surfaces.add_normal_noise(t, 0.003)
     default = meshcurv.principal_curvatures(noisy.vertices, noisy.faces)
     auto = meshcurv.principal_curvatures(noisy.vertices, noisy.faces, radius="auto")
-    assert auto.radius > 1.5 * default.radius
+    assert auto.radius == default.radius
+    assert np.nanmedian(auto.radius_used) > 1.3 * default.radius
     err = [np.nanmean(np.abs(r.k1 - t.k1) + np.abs(r.k2 - t.k2)) for r in (default, auto)]
     assert err[1] < 0.5 * err[0], err
 

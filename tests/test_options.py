@@ -70,7 +70,7 @@ def test_check_options_returns_the_orientation():
 
 
 def test_resolve_plan_has_the_defaults_of_principal_curvatures():
-    """The pilot runs of radius="auto" resolve options without the API: same defaults."""
+    """Plans resolved without the API (autoradius' pilot runs) have the API's defaults."""
     api = inspect.signature(meshcurv.principal_curvatures).parameters
     expected = {k: api[k].default for k in ("n_directions", "neighborhood")}
     expected.update(options.Options().as_dict())

@@ -38,6 +38,8 @@ as in MeshLab; default: the radius whose ball holds about 100 points. A list (--
 estimates at every radius in one pass and names each radius's fields with a suffix: k1_r0p5,
 k1_r1, k1_r2 ("." written "p", "-" "m", "%" "pct": k1_r2pct), so that the names stay
 identifiers in PDAL, laspy and Python; normals, quality and colour are the first radius's.
+--radius auto: each vertex takes the radius (0.7 to 2.8 times the default) that minimises its
+estimated error (noise and bias); the field radius_used (model units) says which.
 Vertices are never reordered, merged or dropped (STL corners are merged by position on reading);
 vertices without an estimate have NaN curvature, valid = 0, quality 0 and a grey colour.
 
@@ -47,7 +49,7 @@ Exit codes: 0 success, 1 a file could not be processed, 2 command-line error."""
 _RADIUS_HELP = ("neighborhood radius: a number in model units (0.05) or a percentage of the "
                 "bounding-box diagonal (2%%); default: the radius whose ball holds ~100 points. "
                 "A comma-separated list (0.5,1,2) writes the fields of every radius, named "
-                "k1_r0p5, k1_r1, k1_r2 ...")
+                "k1_r0p5, k1_r1, k1_r2 ...; auto: a radius per vertex (field radius_used)")
 
 
 def _add_estimation_options(p):
@@ -219,8 +221,11 @@ def _cmd_annotate(args):
 def _summary_line(s):
     """The line ``annotate`` prints for the summary ``s`` of :func:`annotate_file`."""
     if s["suffixes"] is None:
+        used = s.get("radius_used")
+        radius = (f"radius {s['radius']:.6g}" if used is None else
+                  f"radius per vertex {used[0]:.6g} .. {used[1]:.6g} (field radius_used)")
         return (f"{s['output']}: {s['n_valid']} of {s['n_vertices']} vertices estimated, "
-                f"radius {s['radius']:.6g} (model units), {s['seconds']:.1f} s")
+                f"{radius} (model units), {s['seconds']:.1f} s")
     per_radius = [f"{n} at radius {r:.6g} (*{suffix})" for n, r, suffix in
                   zip(s["n_valid_per_radius"], s["radii"], s["suffixes"])]
     return (f"{s['output']}: of {s['n_vertices']} vertices, estimated {', '.join(per_radius)} "

@@ -15,7 +15,7 @@ from .. import io, shape
 from ..options import check_options
 
 __all__ = ["CommandError", "AnnotateOptions", "parse_radius", "parse_radius_list",
-           "is_radius_list", "radius_in_model_units", "radius_suffixes",
+           "is_radius_list", "is_auto_radius", "radius_in_model_units", "radius_suffixes",
            "check_annotate_options", "orientation_for", "orientation_line", "annotate_file",
            "write_preview"]
 
@@ -34,7 +34,8 @@ class AnnotateOptions:
 
     radius : str or None, "2%" (of the bbox diagonal) or "0.05" (model units), or a comma-
         separated list of them ("0.5,1,2": every radius, fields named per radius, see
-        :func:`radius_suffixes`); None = default
+        :func:`radius_suffixes`), or "auto" (each vertex its own radius, written as the field
+        ``radius_used``); None = default
     directions : int, planes through the normal (2 x directions circle fits)
     neighborhood : "auto" | "kring" | "ball"
     normals : "auto" (file normals for point clouds that have them, else estimated) |
@@ -96,12 +97,19 @@ def is_radius_list(spec):
     return spec is not None and "," in str(spec)
 
 
+def is_auto_radius(spec):
+    """Whether the radius option ``spec`` (str or None) asks for the per-vertex scale."""
+    return spec is not None and str(spec).strip().lower() == "auto"
+
+
 def radius_in_model_units(spec, diagonal):
     """Absolute radius for ``spec`` ("2%", "0.05" or None = the estimator's default), or the
-    list of them for a list ("0.5,2%"); ``diagonal()`` gives the bounding-box diagonal a
-    percentage refers to."""
+    list of them for a list ("0.5,2%"), or "auto" (per-vertex scale); ``diagonal()`` gives the
+    bounding-box diagonal a percentage refers to."""
     if spec is None:
         return None
+    if is_auto_radius(spec):
+        return "auto"
     radii = parse_radius_list(spec)
     diag = diagonal() if any(percent for _, percent in radii) else None
     absolute = [value / 100.0 * diag if percent else value for value, percent in radii]
@@ -140,7 +148,7 @@ def orientation_line(note, input_path, options):
 def check_annotate_options(options):
     """Raise CommandError(code 2) for option values no file can fix."""
     try:
-        if options.radius is not None:
+        if options.radius is not None and not is_auto_radius(options.radius):
             parse_radius_list(options.radius)
         if options.quality not in shape.FIELDS:
             raise ValueError(f"--quality must be one of {', '.join(shape.FIELDS)}")
@@ -231,8 +239,20 @@ def annotate_file(input_path, output_path, options=AnnotateOptions(), preview=No
             "n_valid": n_valid[0], "n_nonfinite": len(data.vertices) - n_finite,
             "radius": result.radius, "orientation": result.orientation,
             "radii": [res.radius for res in results], "n_valid_per_radius": n_valid,
-            "suffixes": suffixes,
+            "suffixes": suffixes, "radius_used": _radius_range(result),
             "seconds": time.perf_counter() - t0}
+
+
+def _radius_range(result):
+    """(smallest, largest) ``radius_used`` of the valid rows, None where every row has the
+    one radius ``result.radius`` (or none is valid)."""
+    if result.radius_used is None:
+        return None
+    used = np.asarray(result.radius_used, dtype=np.float64)
+    used = used[np.isfinite(used)]
+    if not len(used) or np.all(used == result.radius):
+        return None
+    return float(used.min()), float(used.max())
 
 
 def write_preview(path, data, result, elev=30.0, azim=-60.0):

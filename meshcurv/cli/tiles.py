@@ -8,8 +8,8 @@ import sys
 import numpy as np
 
 from .. import io
-from .annotate import (CommandError, is_radius_list, orientation_for, orientation_line,
-                       radius_in_model_units)
+from .annotate import (CommandError, is_auto_radius, is_radius_list, orientation_for,
+                       orientation_line, radius_in_model_units)
 from .batch import dask_client
 
 __all__ = ["annotate_tiled_command", "check_las_output"]
@@ -57,6 +57,9 @@ def _check_tiled_arguments(args, options):
     if is_radius_list(options.radius):
         raise CommandError("--tile-size and --dask-scheduler take one --radius, not a list "
                            "(annotate without them for several radii, or once per radius)", 2)
+    if is_auto_radius(options.radius):
+        raise CommandError("--radius auto is not available with --tile-size/--dask-scheduler "
+                           "(the tiles' halo covers one radius); give a radius", 2)
     if options.normals != "auto":
         raise CommandError("--normals: tiled runs use the file's normals when it has them and "
                            "estimate them otherwise (--normals auto)", 2)

@@ -1,0 +1,208 @@
+"""Per-vertex scale (``radius="auto"``): at each vertex, the radius of a ladder that minimises
+the estimated curvature error.
+
+The estimator runs at every radius of a ladder ``r_j = R0 * 2^(j / 2)`` around the default
+radius R0 (:func:`ladder`; one neighbor search over the largest ball,
+:func:`meshcurv.pipeline.run_radii`). At each vertex and radius the squared error of (k1, k2)
+is modelled as variance plus squared bias,
+
+    E_j = V_j + B_j,    V_j = NOISE_GAIN sigma_j^2 / (r_j^4 N_j),    B_j = (a r_j^2)^2,
+
+- V: a height noise sigma_j along the normal (``CurvatureResult.noise``, the local jet's RMS
+  residual at r_j) averaged over the N_j points of the ball (least squares of h = k r^2 / 2
+  over a disc: var(k) ~ sigma^2 / (N r^4)); NOISE_GAIN measured on noisy spheres, where the
+  error is all variance.
+- B: the circle model's error where curvature varies, ~ a r^2. From two neighboring radii,
+  k(r_j) - k(r_j / sqrt 2) = a r_j^2 / 2, so B_j = 4 d_j^2 with d_j the RMS change of (k1, k2)
+  between them, less what the noise puts in that change (nested least-squares estimates
+  differ by variance V_{j-1} - V_j). The smallest radius gets B_1 / 4 (bias^2 ~ r^4).
+
+Both terms are averaged over the ``SMOOTH_NEIGHBORS`` nearest estimated vertices (one vertex's
+change across scales is mostly noise; the curvature, its variation and the noise vary slowly
+over the surface) and the radius minimising E_j is taken among the admissible ones: the
+default radius R0 wherever it is valid; smaller radii with at least ``MIN_SUPPORT``
+neighbors; larger ones also only while ``max(|k1|, |k2|) r_j <= MAX_ARC`` with the curvature
+measured at R0 (the ball stays a small cap of the curvature: thin tubes and coarse meshes are
+not over-smoothed; the larger balls' own curvature is no bound, since a ball spanning a whole
+tube sees a smaller one). Where no radius is admissible the valid one of least estimated error
+is taken; a radius whose row has no estimate is never taken while another radius has one; a
+vertex R0 flags as an outlier keeps R0's row. Every field of the result's row is that
+radius' row, and ``radius_used`` says which.
+
+Not modelled: the noise of given normals (the variance term sees only the positions' noise,
+so clean points with noisy normals get too small a ball).
+"""
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from . import pipeline
+from .neighbors import power_of_two_scale, typical_extent
+from .result import Status
+
+__all__ = ["ladder", "select", "run_auto", "LADDER_EXPONENTS", "NOISE_GAIN", "MIN_SUPPORT",
+           "MAX_ARC", "SMOOTH_NEIGHBORS"]
+
+# Ladder r_j = R0 * 2^(j / 2): from half the default ball's points (~50) to 8 times (~800;
+# what position noise needs to draw level with estimators using normals, issue 15).
+LADDER_EXPONENTS = (-1, 0, 1, 2, 3)
+# Variance of (k1, k2) per sigma^2 / (r^4 N): mean ((dk1^2 + dk2^2) / 2) / mean(noise^2 /
+# (r^4 N)) measured on unit icospheres (2562 and 10242 vertices, noise 0.1 % and 0.3 % of the
+# diagonal, ~40-360 neighbors) lies between 4 and 14 (distance weights, at the lower noise, at
+# the upper end); the middle of that range.
+NOISE_GAIN = 8.0
+# Fewest neighbors of an admissible ball: below, the circle fits' half-sets hold one or two
+# points and the jet measuring the noise has none to spare.
+MIN_SUPPORT = 20
+# Largest max(|k1|, |k2|) r above the default radius, the curvature measured there: 1 rad of
+# arc. 0.7 (the whole-input radius choice's bound) kept the noisy torus (tube radius 0.5,
+# 240 x 60, noise 0.1 / 0.3 %) from its best ladder radius (1.4 R0 = 0.41: mean |dk| 0.0100 /
+# 0.0162 there, 0.0150 / 0.0383 chosen under 0.7, 0.0107 / 0.0166 under 1.0); 1.4 let it take
+# 2 R0 (0.018 / 0.021).
+MAX_ARC = 1.0
+# Estimated vertices whose error curves are averaged (the vertex itself included).
+SMOOTH_NEIGHBORS = 16
+
+
+def ladder(r0, exponents=LADDER_EXPONENTS):
+    """The radii ``r0 * 2^(j / 2)`` for j in ``exponents``, model units, ascending."""
+    return [float(r0) * 2.0 ** (j / 2.0) for j in sorted(exponents)]
+
+
+def _stack(results, name):
+    return np.stack([np.asarray(getattr(r, name), dtype=np.float64) for r in results])
+
+
+def error_terms(results, radii):
+    """Per radius and row ((J, q) float64 each): the variance term V_j and the squared-bias
+    term B_j of the module docstring (NaN where not estimated; B_j may be negative, the
+    noise-corrected change being an unbiased but noisy estimate)."""
+    r = np.asarray(radii, dtype=np.float64)[:, None]
+    k1, k2 = _stack(results, "k1"), _stack(results, "k2")
+    n = np.maximum(_stack(results, "n_neighbors"), 1.0)
+    sigma = _stack(results, "noise")
+    with np.errstate(invalid="ignore", all="ignore"):
+        # a row estimated without a noise measurement (fewer than 11 points): the largest
+        # noise the vertex has at its other radii
+        known = np.isfinite(sigma)
+        typical = np.where(known.any(axis=0), np.nanmax(np.where(known, sigma, -np.inf),
+                                                         axis=0), 0.0)
+        sigma = np.where(known, sigma, typical)
+        var = NOISE_GAIN * sigma ** 2 / (r ** 4 * n)
+        var = np.where(np.isfinite(k1), var, np.nan)
+        d2 = 0.5 * ((k1[1:] - k1[:-1]) ** 2 + (k2[1:] - k2[:-1]) ** 2)
+        noise_part = np.maximum(var[:-1] - var[1:], 0.0)
+        # k(r_j) - k(r_j / sqrt 2) = a r_j^2 / 2: the bias a r_j^2 is twice the change from
+        # the next smaller radius (measured against the change to the next larger one, which
+        # has less noise but sees the larger ball's bias: each wins on some surfaces)
+        bias = np.full_like(var, np.nan)
+        bias[1:] = 4.0 * (d2 - noise_part)
+        # the smallest radius (and one whose smaller neighbor has no estimate): from the next
+        # larger pair, bias^2 ~ r^4
+        for j in range(len(radii) - 2, -1, -1):
+            take = ~np.isfinite(bias[j]) & np.isfinite(k1[j])
+            bias[j] = np.where(take, bias[j + 1] * (r[j, 0] / r[j + 1, 0]) ** 4, bias[j])
+        bias = np.where(np.isfinite(k1), np.nan_to_num(bias, nan=0.0), np.nan)
+    return var, bias
+
+
+def _smoothed(terms, points, k):
+    """Each row of ``terms`` ((J, q)) averaged over the ``k`` nearest of ``points`` ((q, 3))
+    with a finite value (NaN where none)."""
+    finite = np.isfinite(points).all(axis=1)
+    if k <= 1 or finite.sum() < 2:
+        return terms
+    idx = np.flatnonzero(finite)
+    k = min(k, len(idx))
+    p = points[idx]
+    s = power_of_two_scale(typical_extent(p))
+    with np.errstate(over="ignore"):
+        # lengths whose squares overflow (underflow): on coordinates scaled by a power of two
+        p = p * s if s != 1.0 else p
+    _, nb = cKDTree(p).query(p, k)
+    missing = nb >= len(idx)      # neighbors at distances that still overflow (far points)
+    nb = np.where(missing, np.arange(len(idx))[:, None], nb)
+    out = terms.copy()
+    for t_in, t_out in zip(terms, out):
+        vals = np.where(missing, np.nan, t_in[idx][nb])
+        with np.errstate(invalid="ignore"):
+            cnt = np.isfinite(vals).sum(axis=1)
+            mean = np.nansum(vals, axis=1) / np.maximum(cnt, 1)
+        t_out[idx] = np.where(np.isfinite(t_in[idx]) & (cnt > 0), mean, np.nan)
+    return out
+
+
+def select(results, radii, points, fallback=0, smooth=SMOOTH_NEIGHBORS):
+    """Index into ``radii`` per row (q,) int64: the admissible radius of least estimated error
+    (module docstring); where none is admissible the valid one of least error; where no
+    radius has an estimate ``fallback``.
+
+    ``results``: CurvatureResult per radius of ``radii`` (ascending), rows of ``points``
+    ((q, 3), the query positions the averaging uses); ``fallback``: the index of the default
+    radius, which is admissible wherever it is valid (the choice then never needs to be
+    worse than the default), whose curvature bounds the larger radii (MAX_ARC) and whose
+    outliers stay outliers (its row is taken)."""
+    var, bias = error_terms(results, radii)
+    error = _smoothed(var, points, smooth) + np.maximum(_smoothed(bias, points, smooth), 0.0)
+    valid = np.stack([np.asarray(r.valid, dtype=bool) for r in results])
+    support = _stack(results, "n_neighbors") >= MIN_SUPPORT
+    r = np.asarray(radii, dtype=np.float64)[:, None]
+    with np.errstate(invalid="ignore"):
+        kappa = np.fmax(np.abs(_stack(results, "k1")), np.abs(_stack(results, "k2")))
+    # the curvature the ball must stay a small cap of: the default radius' (else the
+    # smallest estimated radius')
+    first = np.argmax(valid, axis=0)
+    reference = np.where(valid[fallback], kappa[fallback], kappa[first, np.arange(valid.shape[1])])
+    with np.errstate(invalid="ignore"):
+        small_cap = ~(reference * r > MAX_ARC)
+    larger = np.arange(len(radii))[:, None] > fallback
+    admissible = valid & support & (small_cap | ~larger)
+    admissible[fallback] = valid[fallback]
+    # tiers: admissible, then valid, then none; within a tier the least error (mapped into
+    # [0, 1], an unknown error last)
+    tier = np.where(admissible, 0, np.where(valid, 1, 2))
+    finite = np.isfinite(error)
+    rank = np.where(finite, error / (1.0 + np.where(finite, error, 0.0)), 1.0)
+    key = 2.0 * tier + np.where(tier < 2, rank, 0.0)
+    choice = np.argmin(key, axis=0)
+    status = results[fallback].status
+    if status is not None:
+        # the default radius' outliers (spikes) stay outliers: no other radius' row for them
+        choice[np.asarray(status) == Status.OUTLIER] = fallback
+    choice[~valid.any(axis=0)] = fallback
+    return choice.astype(np.int64)
+
+
+def assemble(results, radii, choice):
+    """One CurvatureResult whose row i is row i of ``results[choice[i]]``, with
+    ``radius_used`` = ``radii[choice[i]]`` where valid (NaN elsewhere); the other attributes
+    (``radius``, ``orientation``) are those of ``results[0]``."""
+    rows = np.arange(len(choice))
+    middle = results[0]
+    out = type(middle)(**{f: getattr(middle, f) for f in middle.__dataclass_fields__})
+    for name in ("k1", "k2", "d1", "d2", "normals", "valid", "n_neighbors", "n_samples",
+                 "residual", "noise", "status", "outlier_score"):
+        if getattr(middle, name) is None:
+            continue
+        stacked = np.stack([np.asarray(getattr(r, name)) for r in results])
+        setattr(out, name, stacked[choice, rows].copy())
+    used = np.asarray(radii, dtype=np.float64)[choice]
+    out.radius_used = np.where(out.valid, used, np.nan)
+    return out
+
+
+def run_auto(v, f, given_normals, r0, query, plan, progress=False, radii=None,
+             run_radii=pipeline.run_radii):
+    """The per-vertex scale estimate around the default radius ``r0`` (model units): one
+    :class:`meshcurv.CurvatureResult` (rows of ``query``) whose ``radius_used`` gives each
+    row's radius and ``radius`` is ``r0``. ``radii``: the ladder (default :func:`ladder`,
+    ascending, holding ``r0``); ``run_radii``: the estimate at a list of radii, with the
+    signature of :func:`meshcurv.pipeline.run_radii`."""
+    radii = ladder(r0) if radii is None else list(radii)
+    results = run_radii(v, f, given_normals, radii, query, plan, progress)
+    at_r0 = int(np.argmin(np.abs(np.asarray(radii) - r0)))
+    choice = select(results, radii, v[query], fallback=at_r0)
+    out = assemble(results, radii, choice)
+    # the default radius' own attributes: its no-estimate reason and normal orientation note
+    out.radius, out.orientation = float(r0), results[at_r0].orientation
+    return out

@@ -1,0 +1,172 @@
+"""Per-vertex scale (radius="auto", meshcurv.scale): the radius each vertex chooses, the rows
+it takes, and the radius_used field."""
+
+import numpy as np
+import pytest
+
+import meshcurv
+from meshcurv import scale, surfaces
+from meshcurv.neighbors import default_radius
+from meshcurv.result import CURVATURE_FIELDS, Status, curvature_fields
+
+
+def _interior(surface, radius):
+    return surface.border_distance >= radius
+
+
+@pytest.fixture(scope="module")
+def noisy_spheres():
+    """A unit icosphere of 2562 vertices clean, with 0.05 % and with 0.3 % of the diagonal of
+    noise along the normal: {sigma_fraction: (Surface, auto result)}."""
+    clean = surfaces.sphere(1.0, 4)
+    out = {}
+    for noise in (0.0, 0.0005, 0.003):
+        s = surfaces.add_normal_noise(clean, noise, seed=3) if noise else clean
+        out[noise] = s, meshcurv.principal_curvatures(s.vertices, s.faces, radius="auto")
+    return out
+
+
+def test_ladder_is_around_the_default_radius():
+    radii = scale.ladder(2.0)
+    assert radii == pytest.approx([2.0 * 2 ** (j / 2) for j in (-1, 0, 1, 2, 3)])
+    assert radii == sorted(radii)
+
+
+def test_chosen_radius_grows_with_the_noise_on_a_sphere(noisy_spheres):
+    # no bias on a sphere (every normal section is a circle): the noise alone sets the ball
+    medians = [np.nanmedian(res.radius_used) for _, res in
+               (noisy_spheres[n] for n in (0.0005, 0.003))]
+    assert medians[1] > medians[0]
+    s, res = noisy_spheres[0.003]
+    r0 = default_radius(s.vertices, faces=s.faces)
+    assert medians[1] > 1.9 * r0
+    # and the error falls below the default radius' (all variance there: a larger ball helps)
+    fixed = meshcurv.principal_curvatures(s.vertices, s.faces)
+    err_auto = np.nanmean(np.abs(res.k1 - 1) + np.abs(res.k2 - 1))
+    err_fixed = np.nanmean(np.abs(fixed.k1 - 1) + np.abs(fixed.k2 - 1))
+    assert err_auto < 0.5 * err_fixed
+
+
+def test_radius_used_lies_on_the_ladder_and_is_nan_where_invalid(noisy_spheres):
+    s, res = noisy_spheres[0.003]
+    radii = scale.ladder(res.radius)
+    used = res.radius_used[res.valid]
+    assert np.all(np.isin(used, radii))
+    assert np.all(np.isnan(res.radius_used[~res.valid]))
+    assert res.radius == pytest.approx(default_radius(s.vertices, faces=s.faces))
+
+
+def test_clean_surfaces_keep_small_balls():
+    # where the curvature varies (bias ~ r^2) and there is no noise, small balls win
+    for s in (surfaces.torus(2.0, 0.5, 120, 30), surfaces.paraboloid(spacing=0.4)):
+        res = meshcurv.principal_curvatures(s.vertices, s.faces, radius="auto")
+        inner = _interior(s, 2 * res.radius) & res.valid
+        assert inner.sum() > 100
+        assert np.nanmedian(res.radius_used[inner]) <= res.radius * (1 + 1e-12)
+
+
+def test_auto_rows_equal_the_run_at_the_chosen_radius():
+    s = surfaces.add_normal_noise(surfaces.torus(2.0, 0.5, 120, 30), 0.002, seed=5)
+    res = meshcurv.principal_curvatures(s.vertices, s.faces, radius="auto")
+    radii = scale.ladder(res.radius)
+    runs = meshcurv.principal_curvatures(s.vertices, s.faces, radius=radii)
+    chosen = np.flatnonzero(res.valid)
+    assert len(np.unique(res.radius_used[chosen])) >= 2       # the test compares something
+    for r, run in zip(radii, runs):
+        rows = chosen[res.radius_used[chosen] == r]
+        for name in ("k1", "k2", "d1", "d2", "normals", "n_neighbors", "n_samples", "residual",
+                     "noise", "status"):
+            np.testing.assert_array_equal(getattr(res, name)[rows], getattr(run, name)[rows])
+
+
+def test_sparse_patch_gets_a_larger_ball():
+    # a plane patch sampled 16x more sparsely than the rest: its ball grows to keep support
+    rng = np.random.default_rng(0)
+    dense = rng.uniform(-1, 1, size=(12000, 2))
+    dense = dense[dense[:, 0] < 0]
+    sparse = rng.uniform(-1, 1, size=(800, 2))
+    sparse = sparse[sparse[:, 0] >= 0]
+    xy = np.vstack([dense, sparse])
+    pts = np.column_stack([xy, 0.3 * (xy ** 2).sum(axis=1)])        # a gentle paraboloid
+    res = meshcurv.principal_curvatures(pts, radius="auto")
+    dense_in = (xy[:, 0] < -0.4) & (np.abs(xy[:, 1]) < 0.6)
+    sparse_in = (xy[:, 0] > 0.4) & (np.abs(xy[:, 1]) < 0.6)
+    assert np.nanmedian(res.radius_used[sparse_in]) > 1.9 * np.nanmedian(
+        res.radius_used[dense_in])
+    assert res.valid[sparse_in].mean() > 0.99
+
+
+def _result(k1, valid, n_neighbors, noise=0.0, radius=1.0):
+    q = len(k1)
+    k1 = np.where(valid, k1, np.nan)
+    return meshcurv.CurvatureResult(
+        k1=k1, k2=k1.copy(), d1=np.zeros((q, 3)), d2=np.zeros((q, 3)), normals=np.zeros((q, 3)),
+        valid=np.asarray(valid), n_neighbors=np.full(q, n_neighbors, dtype=np.int32),
+        n_samples=np.full(q, 16, dtype=np.int32), residual=np.zeros(q),
+        noise=np.full(q, noise), radius=radius,
+        status=np.where(valid, Status.OK, Status.TOO_FEW_HALF_SETS).astype(np.int8))
+
+
+def test_invalid_rows_are_never_chosen_while_another_radius_has_an_estimate():
+    q = 40
+    pts = np.column_stack([np.arange(q, dtype=float), np.zeros(q), np.zeros(q)])
+    rng = np.random.default_rng(1)
+    radii = scale.ladder(1.0)
+    valid = rng.uniform(size=(len(radii), q)) < 0.4
+    valid[:, :3] = False                                          # no radius has one
+    results = [_result(np.full(q, 0.1), valid[j], 30 * 2 ** j, noise=0.01, radius=r)
+               for j, r in enumerate(radii)]
+    choice = scale.select(results, radii, pts, fallback=1)
+    has = valid.any(axis=0)
+    assert np.all(valid[choice[has], np.flatnonzero(has)])
+    assert np.all(choice[~has] == 1)
+    out = scale.assemble(results, radii, choice)
+    assert np.all(out.valid == has)
+    assert np.all(out.status[~has] == Status.TOO_FEW_HALF_SETS)
+    assert np.all(np.isnan(out.radius_used[~has]))
+
+
+def test_too_little_support_or_too_large_an_arc_is_avoided():
+    q = 10
+    pts = np.column_stack([np.arange(q, dtype=float), np.zeros(q), np.zeros(q)])
+    radii = [1.0, 2.0, 4.0]
+    ok = np.ones(q, dtype=bool)
+    # the default radius 2 in the middle; the smallest ball holds 5 points (below
+    # MIN_SUPPORT); the largest spans an arc of 0.5 x 4 = 2 rad (above MAX_ARC)
+    results = [_result(np.full(q, 0.5), ok, 5, noise=0.0, radius=1.0),
+               _result(np.full(q, 0.5), ok, 100, noise=0.0, radius=2.0),
+               _result(np.full(q, 0.5), ok, 400, noise=0.0, radius=4.0)]
+    assert np.all(scale.select(results, radii, pts, fallback=1) == 1)
+
+
+def test_fixed_radius_reports_it_per_row_and_writers_carry_radius_used():
+    s = surfaces.sphere(1.0, 3)
+    res = meshcurv.principal_curvatures(s.vertices, s.faces, radius=0.4)
+    assert np.all(res.radius_used[res.valid] == 0.4)
+    assert "radius_used" in CURVATURE_FIELDS
+    np.testing.assert_array_equal(curvature_fields(res)["radius_used"], res.radius_used)
+
+
+def test_cli_auto_writes_radius_used(tmp_path):
+    from meshcurv import io
+    from meshcurv.cli import main
+
+    s = surfaces.add_normal_noise(surfaces.sphere(1.0, 4), 0.003, seed=3)
+    src, dst = tmp_path / "in.xyz", tmp_path / "out.ply"
+    np.savetxt(src, s.vertices)
+    assert main(["annotate", str(src), "-o", str(dst), "--radius", "auto"]) == 0
+    used = np.asarray(io.read(dst).fields["radius_used"])
+    res = meshcurv.principal_curvatures(s.vertices, radius="auto")
+    np.testing.assert_allclose(used, res.radius_used, equal_nan=True)
+    assert np.nanmax(used) > np.nanmin(used) or np.nanmin(used) > res.radius
+
+
+def test_tiled_cli_refuses_auto_in_one_line(tmp_path, capsys):
+    from meshcurv.cli import main
+
+    src = tmp_path / "in.laz"
+    code = main(["annotate", str(src), "-o", str(tmp_path / "out.laz"), "--radius", "auto",
+                 "--tile-size", "10"])
+    assert code == 2
+    err = capsys.readouterr().err.strip()
+    assert "--radius auto" in err and len(err.splitlines()) == 1

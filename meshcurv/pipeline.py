@@ -459,9 +459,10 @@ def _pca_field(v, face_normals, search, finite, radius, plan, progress, point_we
     normals (torus 240 x 60, 0.3 % noise: mean |dk| 0.036 with them, 0.135 with face normals,
     0.206 with none) and cost what the blocks would spend on them.
 
-    ``plain``: the same field without ``point_weights`` (n, 3), if at hand: it is the weighted
-    one wherever no point of the neighborhood weighs less than 1, so only the vertices within
-    ``radius`` of such a point are fitted again (every vertex where that is most of them)."""
+    ``plain``: the same field without ``point_weights`` (n, 3), if at hand (filled in place and
+    returned): it is the weighted one wherever no point of the neighborhood weighs less than
+    1, so only the vertices within ``radius`` of such a point are fitted again (every vertex
+    where that is most of them)."""
     rows = np.arange(len(v)) if finite is None else finite
     if search.rank is not None:
         rows = search.rank          # the grid's cell order: neighborhoods stay in cache

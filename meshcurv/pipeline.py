@@ -320,11 +320,55 @@ def outlier_scores(v, radius, search, rows, progress, block=BLOCK):
     score = np.full(len(v), np.nan)
     for pos in blocks(rows, progress, "outliers", block):
         indptr, indices = search.neighbors(pos)
-        residual, scale, dof = (np.empty(len(pos)) for _ in range(3))
-        outliers.point_residuals(search.points, v[pos], indptr, indices, radius, residual, scale,
-                                 dof)
-        score[pos] = outliers.outlier_score(residual, scale, dof)
+        _score_block(score, v, radius, search, pos, indptr, indices)
     return score
+
+
+def _score_block(score, v, radius, search, pos, indptr, indices):
+    """:func:`outlier_scores` of the points ``v[pos]`` from their lists, into ``score[pos]``."""
+    residual, scale, dof = (np.empty(len(pos)) for _ in range(3))
+    outliers.point_residuals(search.points, v[pos], indptr, indices, radius, residual, scale, dof)
+    score[pos] = outliers.outlier_score(residual, scale, dof)
+
+
+def _outlier_pass(v, f, radius, search, rows, plan, progress, block, face_normals):
+    """The outlier scores of :func:`outlier_scores` and, from the same neighbor lists (one
+    search for all), what else needs every point's neighborhood before the blocks and does
+    not depend on the scores: the spanning tree's normals (``plan.normals == "mst"``, when
+    ``rows`` are all the finite points) and the plane-fit field of :func:`_pca_field` without
+    the outlier weights (normal-aware fits with ``plan.normals == "pca"``), which
+    :func:`_pca_field` then fits again only where a neighborhood holds a down-weighted point.
+
+    Returns ``(score (n,), tree, plain)``: ``tree`` the ``(normals, note)`` of
+    :func:`mst_normals` or None, ``plain`` the (n, 3) unweighted field or None.
+    """
+    n = len(v)
+    whole = len(rows) == np.count_nonzero(np.isfinite(v).all(axis=1))
+    tree = plan.normals == "mst" and f is None and whole
+    field = plan.normal_constraints and plan.normals == "pca" and whole
+    if not (tree or field):
+        return outlier_scores(v, radius, search, rows, progress, block), None, None
+    score = np.full(n, np.nan)
+    nv = graph = plain = None
+    if tree:
+        nv, graph = _tree_arrays(n)
+    if field:
+        plain = np.full((n, 3), np.nan)
+    if search.rank is not None:
+        rows = search.rank          # the grid's cell order (the finite points): cache-friendly
+    elif tree:
+        rows = rows[spatial_order(v[rows], radius)]
+    block = min(block, block_size(search, rows, radius, "points"))
+    for pos in blocks(rows, progress, "outliers and normals", block):
+        indptr, indices = search.neighbors(pos)
+        _score_block(score, v, radius, search, pos, indptr, indices)
+        if tree:
+            _tree_block(nv, graph, v, radius, search, pos, indptr, indices)
+        if field:
+            plain[pos] = _block_normals(None, face_normals, pos, v[pos], indptr, indices,
+                                        radius, search, plan)
+        del indptr, indices
+    return score, (orient_mst(v, nv, neighbors=graph, note=True) if tree else None), plain
 
 
 def _scored_rows(v, search, query, finite, block, plan):
@@ -349,18 +393,27 @@ def mst_normals(v, radius, search, progress, block=BLOCK, point_weights=None):
     ``point_weights`` (per row of ``search.points``) weight the plane fits. Returns
     ``(normals (n, 3), note)``: the note says how the pieces were oriented
     (:func:`meshcurv.normals.orient.orientation_note`)."""
-    n = len(v)
-    nv = np.full((n, 3), np.nan)
-    graph = np.full((n, TREE_NEIGHBORS), -1, dtype=np.int32)
+    nv, graph = _tree_arrays(len(v))
     # the grid's own cell order (``rank``) when there is one, else one made for the purpose
-    rank = search.rank
-    order = rank if rank is not None else spatial_order(v, radius)
+    order = search.rank if search.rank is not None else spatial_order(v, radius)
     for pos in blocks(order, progress, "normals", block):
         indptr, indices = search.neighbors(pos)
-        nv[pos] = pca_normals(search.points, v[pos], indptr, indices, radius, point_weights)
-        near = orient.nearest_in_lists(search.points, v[pos], indptr, indices, TREE_NEIGHBORS)
-        graph[pos] = near if rank is None else np.where(near >= 0, rank[near], -1)
+        _tree_block(nv, graph, v, radius, search, pos, indptr, indices, point_weights)
     return orient_mst(v, nv, neighbors=graph, note=True)
+
+
+def _tree_arrays(n):
+    """Unoriented normals (n, 3) NaN and spanning-tree graph (n, TREE_NEIGHBORS) int32 -1 of
+    :func:`mst_normals`, before the blocks fill them."""
+    return np.full((n, 3), np.nan), np.full((n, TREE_NEIGHBORS), -1, dtype=np.int32)
+
+
+def _tree_block(nv, graph, v, radius, search, pos, indptr, indices, point_weights=None):
+    """The plane-fit normals and the tree graph's nearest neighbors (vertex indices) of the
+    points ``v[pos]`` from their lists, into ``nv[pos]`` and ``graph[pos]``."""
+    nv[pos] = pca_normals(search.points, v[pos], indptr, indices, radius, point_weights)
+    near = orient.nearest_in_lists(search.points, v[pos], indptr, indices, TREE_NEIGHBORS)
+    graph[pos] = near if search.rank is None else np.where(near >= 0, search.rank[near], -1)
 
 
 def estimate_normals(v, radius, progress=False):
@@ -398,21 +451,48 @@ def _start_normals(v, f, given, radius, search, finite, plan, progress, point_we
     return (face_normals if plan.normals == "faces" else None), face_normals, note
 
 
-def _pca_field(v, face_normals, search, finite, radius, plan, progress, point_weights=None):
+def _pca_field(v, face_normals, search, finite, radius, plan, progress, point_weights=None,
+               plain=None):
     """The block normals of every vertex before the blocks (:func:`_block_normals`' plane
     fits), for the normal-aware circle fits: (n, 3), NaN where the neighborhood is too small.
     Measured, on noisy meshes these normals serve the circle fits far better than the face
     normals (torus 240 x 60, 0.3 % noise: mean |dk| 0.036 with them, 0.135 with face normals,
-    0.206 with none) and cost what the blocks would spend on them."""
+    0.206 with none) and cost what the blocks would spend on them.
+
+    ``plain``: the same field without ``point_weights`` (n, 3), if at hand (filled in place and
+    returned): it is the weighted one wherever no point of the neighborhood weighs less than
+    1, so only the vertices within ``radius`` of such a point are fitted again (every vertex
+    where that is most of them)."""
     rows = np.arange(len(v)) if finite is None else finite
     if search.rank is not None:
         rows = search.rank          # the grid's cell order: neighborhoods stay in cache
-    nv = np.full((len(v), 3), np.nan)
+    if plain is not None:
+        light = np.flatnonzero(point_weights < 1.0)
+        near = _near_points(v, search.points[light], rows, radius)
+        if len(near) <= len(rows) // 2:
+            rows, nv = near, plain
+        else:
+            plain = None
+    if plain is None:
+        nv = np.full((len(v), 3), np.nan)
     for pos in blocks(rows, progress, "normals", block_size(search, rows, radius, "points")):
         indptr, indices = search.neighbors(pos)
         nv[pos] = _block_normals(None, face_normals, pos, v[pos], indptr, indices, radius,
                                  search, plan, point_weights)
     return nv
+
+
+def _near_points(v, centres, rows, radius):
+    """The vertices among ``rows`` within ``radius`` of any of the points ``centres`` (m, 3),
+    ascending (a few more at the margin: any neighbor list holding a centre, ball or k-ring,
+    is among theirs)."""
+    if len(centres) == 0 or len(rows) == 0:
+        return np.zeros(0, dtype=np.int64)
+    reach = radius * (1.0 + 1e-9)
+    grid = ball_grid(centres, reach)
+    if grid is None:
+        return np.asarray(rows, dtype=np.int64)
+    return np.sort(rows[ball_counts(grid, v[rows], reach) > 0])
 
 
 def _block_normals(nv, face_normals, idx, xb, indptr, indices, radius, search, plan,
@@ -666,28 +746,41 @@ class _Scale(NamedTuple):
 
 def _prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progress):
     """The :class:`_Scale` of radius ``r`` over the search ``s``."""
-    score = weights = None
+    score = weights = tree = plain = start = None
+    if plan.normals != "mst":
+        # not from the lists: before the outlier pass, whose plane fits take the faces' sides
+        start = _start_normals(v, f, given_normals, r, s, finite, plan, progress)
     if plan.robust_points:
-        # scores by vertex; weights by row of s.points (the grid's order where it has one)
-        score = outlier_scores(v, r, s, _scored_rows(v, s, query, finite, block, plan),
-                               progress, block)
+        # scores by vertex; weights by row of s.points (the grid's order where it has one);
+        # the same lists give the spanning tree's or the unweighted plane-fit normals
+        rows = _scored_rows(v, s, query, finite, block, plan)
+        score, tree, plain = _outlier_pass(v, f, r, s, rows, plan, progress, block,
+                                           None if start is None else start[1])
         weight = outliers.outlier_weight(score)
         weights = weight if s.rank is None else weight[s.rank]
-    # the spanning tree's normals unweighted: they are estimate_normals', which tiled runs
-    # share between tiles (the weighted local jet refines them)
-    nv, face_normals, note = _start_normals(v, f, given_normals, r, s, finite, plan, progress)
+    if tree is not None:
+        start = (tree[0], None, tree[1])
+    if start is None:
+        # the spanning tree's normals unweighted: they are estimate_normals', which tiled runs
+        # share between tiles (the weighted local jet refines them)
+        start = _start_normals(v, f, given_normals, r, s, finite, plan, progress)
+    nv, face_normals, note = start
     given_a2 = given_normal_noise(v, nv, r, s, query) if plan.check_given else 0.0
     block_nv = nv
     if plan.normal_constraints and nv is None:
-        block_nv = _pca_field(v, face_normals, s, finite, r, plan, progress, weights)
+        block_nv = _pca_field(v, face_normals, s, finite, r, plan, progress, weights, plain)
     field = block_nv
     if (plan.normal_constraints and weights is not None and plan.refine
             and nv is not None and np.any(weights < 1.0)):
         # estimated normals made before the outlier weights (the spanning tree's, or a
         # tile's) fitted again with them for the neighbors' normal rows, keeping their sides:
         # a stray point tilts the plane fits of all its neighbors (the plane-fit field above
-        # has the weights already)
-        field = _pca_field(v, nv, s, finite, r, plan, progress, weights)
+        # has the weights already); unweighted, the fits oriented like the tree's normals are
+        # those normals
+        with np.errstate(invalid="ignore", divide="ignore"):
+            plain = (nv / np.linalg.norm(nv, axis=1, keepdims=True)
+                     if tree is not None else None)
+        field = _pca_field(v, nv, s, finite, r, plan, progress, weights, plain)
     return _Scale(r, s, score, weights, nv, face_normals, note, block_nv, given_a2,
                   _normal_field(field, s, plan))
 

@@ -58,6 +58,16 @@ SIDEWAYS_MEAN_NORMAL_Z = 0.1
 PIECE_RULES = ("outward (closed surface)", "towards +z (open surface)",
                "away from the centroid (open surface facing sideways)")
 
+# Rows per piece of the whole-cloud steps of :func:`orient_mst` done piecewise to bound their
+# temporaries (even: the pieces keep the whole arrays' alignment).
+_ROWS = 1 << 16
+
+
+def _plain(a):
+    """Whether ``a`` is a C-contiguous float64 array (used as it is, without a copy)."""
+    return isinstance(a, np.ndarray) and a.dtype == np.float64 and a.flags.c_contiguous
+
+
 def orient_like(normals, reference):
     """Flip each normal to agree with a reference (e.g. face normals); in place, returned."""
     flip = np.einsum("ij,ij->i", normals, reference) < 0
@@ -121,11 +131,39 @@ def sample_areas(points, neighbors):
     area-weighted normals summing to about zero.
 
     ``points`` (n, 3); ``neighbors`` (n, k) int, indices into ``points``, -1 for none.
+    Numpy specification: :func:`meshcurv.normals.orient_spec.sample_area`.
     """
     nb = np.asarray(neighbors)
-    d = points[np.where(nb >= 0, nb, 0)] - points[:, None, :]
-    d2 = np.where(nb >= 0, np.einsum("ijk,ijk->ij", d, d), 0.0)
-    return d2.max(axis=1, initial=0.0)
+    if nb.ndim != 2 or len(nb) != len(points):
+        raise ValueError(f"neighbors must be ({len(points)}, k), not {nb.shape}")
+    return _farthest_neighbor_d2(np.ascontiguousarray(points, dtype=np.float64),
+                                 np.ascontiguousarray(nb))
+
+
+@njit(parallel=True, cache=True)
+def _farthest_neighbor_d2(points, neighbors):
+    """:func:`sample_areas`' kernel: one pass over the graph rows, without the (n, k, 3)
+    offsets of the numpy specification (ten times faster)."""
+    n, k = neighbors.shape
+    out = np.zeros(n)
+    nchunks = (n + CHUNK - 1) // CHUNK
+    for c in prange(nchunks):
+        for i in range(c * CHUNK, min(n, (c + 1) * CHUNK)):
+            best = 0.0
+            for a in range(k):
+                j = neighbors[i, a]
+                if j < 0:
+                    continue
+                d0 = points[j, 0] - points[i, 0]
+                d1 = points[j, 1] - points[i, 1]
+                d2 = points[j, 2] - points[i, 2]
+                # in the order numpy's einsum sums three products (x0 x0 + x2 x2) + x1 x1,
+                # as the areas were first computed: the same bits
+                dd = (d0 * d0 + d2 * d2) + d1 * d1
+                if dd > best:
+                    best = dd
+            out[i] = best
+    return out
 
 
 def nearest_areas(points, query_points, radius, k):
@@ -197,8 +235,10 @@ def orient_mst(points, normals, k=10, neighbors=None, note=False):
     ok = np.flatnonzero(np.isfinite(normals).all(axis=1) & np.isfinite(points).all(axis=1))
     if len(ok) == 0:
         return (normals, orientation_note([], [])) if note else normals
-    p = points[ok]
-    nv = np.ascontiguousarray(normals[ok])
+    # every row kept: the arrays themselves, not copies (``normals`` is oriented in place)
+    whole = len(ok) == len(points)
+    p = points if whole and _plain(points) else points[ok]
+    nv = normals if whole and _plain(normals) else np.ascontiguousarray(normals[ok])
     if neighbors is None:
         kk = min(k, len(ok) - 1)
         if kk >= 1:
@@ -231,7 +271,9 @@ def orient_mst(points, normals, k=10, neighbors=None, note=False):
     rank[order] = np.arange(len(p), dtype=np.int32)
     rank[-1] = -1                          # "no neighbor" stays -1 (index -1 wraps to it)
     graph = np.ascontiguousarray(nb[order], dtype=np.int32)
-    np.take(rank, graph, out=graph, mode="wrap")
+    for s in range(0, len(graph), _ROWS):
+        # in pieces: on the whole graph numpy's take buffers it (80 bytes per point)
+        np.take(rank, graph[s:s + _ROWS], out=graph[s:s + _ROWS], mode="wrap")
     nv_sorted = np.ascontiguousarray(nv[order])
     labels = orient_spanning_tree(nv_sorted, graph, 4096)
     del graph
@@ -247,13 +289,19 @@ def orient_mst(points, normals, k=10, neighbors=None, note=False):
     size = np.where(weight > 0, weight, 1.0)
     centroid = np.column_stack([np.bincount(labels, weights=area * p[:, c], minlength=n_comp)
                                 for c in range(3)]) / size[:, None]
-    score = np.bincount(labels, weights=area * np.einsum("ij,ij->i", p - centroid[labels], nv),
-                        minlength=n_comp)
+    along = np.empty(len(p))
+    for s in range(0, len(p), _ROWS):
+        # in pieces: no (n, 3) offsets from the centroids
+        e = s + _ROWS
+        along[s:e] = area[s:e] * np.einsum("ij,ij->i", p[s:e] - centroid[labels[s:e]], nv[s:e])
+    score = np.bincount(labels, weights=along, minlength=n_comp)
+    del along
     normal_sum = np.column_stack([np.bincount(labels, weights=area * nv[:, c],
                                               minlength=n_comp) for c in range(3)])
     sign, rule = piece_signs(weight, normal_sum, score)
     nv[sign[labels] < 0] *= -1.0
-    normals[ok] = nv
+    if nv is not normals:
+        normals[ok] = nv
     return (normals, orientation_note(rule, count)) if note else normals
 
 

@@ -188,6 +188,18 @@ def sym_eig_jacobi(a, vecs, npar):
 
 
 @njit(cache=True)
+def insertion_sort(a, lo, hi):
+    """Sort ``a[lo:hi]`` ascending in place (stable; for the few entries of a short range)."""
+    for i in range(lo + 1, hi):
+        x = a[i]
+        j = i - 1
+        while j >= lo and a[j] > x:
+            a[j + 1] = a[j]
+            j -= 1
+        a[j + 1] = x
+
+
+@njit(cache=True)
 def select_median(a, n):
     """Median of ``a[:n]`` (float64, n >= 1), the value ``np.median`` gives (the mean of the
     two middle values for even n), without allocating: ``a[:n]`` is reordered in place.
@@ -233,13 +245,7 @@ def select_median(a, n):
             lo = hi = half
         else:
             lo = equal
-    for i in range(lo + 1, hi + 1):
-        x = a[i]
-        j = i - 1
-        while j >= lo and a[j] > x:
-            a[j + 1] = a[j]
-            j -= 1
-        a[j + 1] = x
+    insertion_sort(a, lo, hi + 1)
     upper = a[half]
     if n & 1:
         return upper

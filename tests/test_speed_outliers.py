@@ -103,3 +103,15 @@ def test_cubic_moments_equal_the_projection_and_moments_bit_for_bit():
         _moments(projected, wd, wr, k, part, hpart, degree)
         np.testing.assert_array_equal(part, np.where(low <= degree, ref, 0.0))
         np.testing.assert_array_equal(hpart, np.where(low <= degree // 2, href, 0.0))
+
+
+def test_insertion_sort_sorts_only_its_range():
+    from meshcurv.linalg import insertion_sort
+
+    rng = np.random.default_rng(3)
+    for n in (0, 1, 2, 7, 30):
+        a = rng.integers(0, 5, n + 6).astype(np.int64)
+        b = a.copy()
+        insertion_sort(a, 3, 3 + n)
+        b[3:3 + n] = np.sort(b[3:3 + n])
+        np.testing.assert_array_equal(a, b)

@@ -7,6 +7,7 @@ import numba
 import numpy as np
 from numba import njit, prange
 
+from ..linalg import insertion_sort
 from .csr import gather_streams, overflowed, sample_step, stream_capacity, thread_ranges
 
 __all__ = ["edge_adjacency", "kring_neighbors", "kring_counts", "KringWork",
@@ -128,14 +129,7 @@ def edge_adjacency_csr(faces, n):
     for i in range(n):
         lo = start[i]
         hi = start[i + 1]
-        # insertion sort: rows hold ~12 entries
-        for j in range(lo + 1, hi):
-            key = idx[j]
-            k = j - 1
-            while k >= lo and idx[k] > key:
-                idx[k + 1] = idx[k]
-                k -= 1
-            idx[k + 1] = key
+        insertion_sort(idx, lo, hi)     # rows hold ~12 entries
         # compaction never overtakes the unsorted rows ahead: out <= lo
         prev = -1
         for j in range(lo, hi):

@@ -222,10 +222,11 @@ def _summary_line(s):
     """The line ``annotate`` prints for the summary ``s`` of :func:`annotate_file`."""
     if s["suffixes"] is None:
         used = s.get("radius_used")
-        radius = (f"radius {s['radius']:.6g}" if used is None else
-                  f"radius per vertex {used[0]:.6g} .. {used[1]:.6g} (field radius_used)")
+        radius = (f"radius {s['radius']:.6g} (model units)" if used is None else
+                  f"radius per vertex {used[0]:.6g} .. {used[1]:.6g} (model units; field "
+                  f"radius_used)")
         return (f"{s['output']}: {s['n_valid']} of {s['n_vertices']} vertices estimated, "
-                f"{radius} (model units), {s['seconds']:.1f} s")
+                f"{radius}, {s['seconds']:.1f} s")
     per_radius = [f"{n} at radius {r:.6g} (*{suffix})" for n, r, suffix in
                   zip(s["n_valid_per_radius"], s["radii"], s["suffixes"])]
     return (f"{s['output']}: of {s['n_vertices']} vertices, estimated {', '.join(per_radius)} "

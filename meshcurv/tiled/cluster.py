@@ -54,8 +54,11 @@ def dask_client(scheduler, n_workers, threads_per_task=None):
     if threads_per_task is not None and int(threads_per_task) < 1:
         raise ValueError(f"threads_per_task must be at least 1, got {threads_per_task}")
     if scheduler is not None:
-        with connect(scheduler) as client:
-            yield client, threads_per_task
+        try:
+            with connect(scheduler) as client:
+                yield client, threads_per_task
+        finally:
+            _set_distributed_log_level(None)
         return
     n_workers = int(n_workers or min(os.cpu_count() or 1, 8))
     threads = int(threads_per_task or threads_per_process(n_workers))
@@ -162,6 +165,10 @@ def run_jobs(client, jobs, desc, unit, in_path, progress):
                                 f"({type(e).__name__}: {e})") from e
             bar.update(1)
     except BaseException:
+        # the caller reports this in one line; the scheduler (in this process for a
+        # LocalCluster) logs the keys it can no longer gather once they are cancelled, from
+        # its own thread: quiet before cancelling, not after (dask_client restores the level)
+        _set_distributed_log_level(logging.CRITICAL)
         client.cancel(list(futures))
         raise
     finally:

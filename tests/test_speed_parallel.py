@@ -133,17 +133,6 @@ def test_block_copy_falls_back_when_the_layouts_differ():
     assert target["X"].tolist() == [1, 2, 3] and target["Y"].tolist() == [4, 5, 6]
 
 
-def test_laz_writes_use_the_multithreaded_lazrs_backend_when_installed():
-    import laspy
-
-    from meshcurv.io import las
-
-    backends = las.laz_backends()
-    if laspy.LazBackend.LazrsParallel.is_available():
-        assert backends[0] is laspy.LazBackend.LazrsParallel
-    assert all(b.is_available() for b in backends)
-
-
 # ------------------------------------------------------------------------------ tiled runs
 
 def test_tiled_local_cluster_workers_run_their_share_of_the_threads(no_user_threads):

@@ -57,8 +57,7 @@ __all__ = ["LasReadError", "CURVATURE_FIELDS", "NORMAL_FIELDS", "NAME_LIMIT", "D
            "las_point_count", "open_las", "normal_dims", "iter_las_chunks", "read_las_points",
            "read_las_cloud", "result_fields", "output_version", "check_paths",
            "new_dimension_names",
-           "check_annotatable", "annotate_las", "laz_backends", "write_las_curvature",
-           "require_laspy",
+           "check_annotatable", "annotate_las", "write_las_curvature", "require_laspy",
            "read_las", "write_las", "readers", "writers"]
 
 
@@ -123,7 +122,7 @@ def open_las(path):
         raise ValueError(f"{path}: expected a .las or .laz file")
     _check_vlr_count(path)
     try:
-        reader = laspy.open(os.fspath(path), laz_backend=laz_backends())
+        reader = laspy.open(os.fspath(path))
     except FileNotFoundError:
         raise
     except Exception as e:  # laspy/lazrs raise a variety of types for bad headers
@@ -384,12 +383,10 @@ def annotate_las(in_path, out_path, fields_for, names, chunk_size=DEFAULT_CHUNK,
                                description=_DESCRIPTIONS.get(split_radius_suffix(n)[0], ""))
         for n, t in _field_types(names, float_type)])
 
-    compress = file_extension(out_path) == ".laz"
-
     def write(tmp):
         with open(tmp, "wb") as fh, laspy.open(
-                fh, mode="w", header=header, closefd=False, do_compress=compress,
-                laz_backend=laz_backends() if compress else None) as writer:
+                fh, mode="w", header=header, closefd=False,
+                do_compress=file_extension(out_path) == ".laz") as writer:
             for first, _, _, rec in iter_las_chunks(in_path, chunk_size, with_records=True):
                 out = laspy.ScaleAwarePointRecord.zeros(len(rec), header=header)
                 _copy_input_dims(rec.array, out.array)
@@ -399,17 +396,6 @@ def annotate_las(in_path, out_path, fields_for, names, chunk_size=DEFAULT_CHUNK,
                 writer.write_points(out)
 
     atomic_write(out_path, write)
-
-
-def laz_backends():
-    """laspy's LAZ backends in the order meshcurv uses them: lazrs's multi-threaded one first
-    (chunks of 50 000 points compressed and decompressed on every core), then single-threaded
-    lazrs, then LASzip; only those installed. Compression is most of the time of a LAZ write
-    (the float64 curvature fields compress poorly), and lazrs holds the GIL while it works:
-    its own threads are the only way to share it out within one process."""
-    import laspy
-
-    return laspy.LazBackend.detect_available()
 
 
 def _copy_input_dims(source, target):

@@ -144,9 +144,10 @@ def _run_rescaled(v, f, given_normals, radius, query, plan, progress, scale):
         for name in ("k1", "k2", "residual"):
             setattr(res, name, getattr(res, name) * scale)
         res.noise = res.noise / scale
+        res.radius_used = res.radius_used / scale
     # curvatures of a subnormal-sized cloud may exceed float64: no estimate there
     lost = res.valid & ~(np.isfinite(res.k1) & np.isfinite(res.k2))
-    for name in ("k1", "k2", "d1", "d2", "residual"):
+    for name in ("k1", "k2", "d1", "d2", "residual", "radius_used"):
         getattr(res, name)[lost] = np.nan
     res.valid &= ~lost
     res.status[lost] = Status.OUT_OF_RANGE
@@ -244,26 +245,18 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
 
 def _run_radii(v, f, given_normals, radii, query, plan, progress):
     """:func:`meshcurv.pipeline.run_radii`, or one rescaled run per radius where a square
-    would overflow; ``radius_used`` set on each result."""
+    would overflow."""
     if all(power_of_two_scale(r) == 1.0 for r in radii):
-        results = pipeline.run_radii(v, f, given_normals, radii, query, plan, progress)
-        return [_with_radius_used(res) for res in results]
+        return pipeline.run_radii(v, f, given_normals, radii, query, plan, progress)
     return [_run_one(v, f, given_normals, r, query, plan, progress) for r in radii]
-
-
-def _with_radius_used(res):
-    """``res`` with ``radius_used`` = its radius where valid, NaN elsewhere (fixed radius)."""
-    res.radius_used = np.where(res.valid, float(res.radius), np.nan)
-    return res
 
 
 def _run_one(v, f, given_normals, radius, query, plan, progress):
     """:func:`meshcurv.pipeline.run` at one radius, rescaled where its square would overflow."""
     scale = power_of_two_scale(radius)
     if scale != 1.0:
-        return _with_radius_used(_run_rescaled(v, f, given_normals, radius, query, plan,
-                                               progress, scale))
-    return _with_radius_used(pipeline.run(v, f, given_normals, radius, query, plan, progress))
+        return _run_rescaled(v, f, given_normals, radius, query, plan, progress, scale)
+    return pipeline.run(v, f, given_normals, radius, query, plan, progress)
 
 
 def _is_radius_list(radius):

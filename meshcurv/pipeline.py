@@ -536,11 +536,13 @@ class _Outputs:
         self.status[out] = Status.OUTLIER
 
     def result(self, radius):
+        valid = np.isfinite(self.k1)
         return CurvatureResult(k1=self.k1, k2=self.k2, d1=self.d1, d2=self.d2,
-                               normals=self.normals, valid=np.isfinite(self.k1),
+                               normals=self.normals, valid=valid,
                                n_neighbors=self.n_neighbors, n_samples=self.n_samples,
                                residual=self.residual, noise=self.noise, radius=radius,
-                               status=self.status, outlier_score=self.outlier_score)
+                               status=self.status, outlier_score=self.outlier_score,
+                               radius_used=np.where(valid, float(radius), np.nan))
 
 
 def _normal_field(nv, search, plan):
@@ -746,10 +748,10 @@ class _Scale(NamedTuple):
 
 def _prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progress):
     """The :class:`_Scale` of radius ``r`` over the search ``s``."""
-    score = weights = tree = plain = start = None
-    if plan.normals != "mst":
-        # not from the lists: before the outlier pass, whose plane fits take the faces' sides
-        start = _start_normals(v, f, given_normals, r, s, finite, plan, progress)
+    score = weights = tree = plain = None
+    # not from the lists: before the outlier pass, whose plane fits take the faces' sides
+    start = None if plan.normals == "mst" else _start_normals(v, f, given_normals, r, s,
+                                                              finite, plan, progress)
     if plan.robust_points:
         # scores by vertex; weights by row of s.points (the grid's order where it has one);
         # the same lists give the spanning tree's or the unweighted plane-fit normals
@@ -758,12 +760,12 @@ def _prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progre
                                            None if start is None else start[1])
         weight = outliers.outlier_weight(score)
         weights = weight if s.rank is None else weight[s.rank]
-    if tree is not None:
-        start = (tree[0], None, tree[1])
     if start is None:
-        # the spanning tree's normals unweighted: they are estimate_normals', which tiled runs
-        # share between tiles (the weighted local jet refines them)
-        start = _start_normals(v, f, given_normals, r, s, finite, plan, progress)
+        # the spanning tree's normals unweighted (from the outlier pass's lists, or their own):
+        # they are estimate_normals', which tiled runs share between tiles (the weighted local
+        # jet refines them)
+        start = ((tree[0], None, tree[1]) if tree is not None else
+                 _start_normals(v, f, given_normals, r, s, finite, plan, progress))
     nv, face_normals, note = start
     given_a2 = given_normal_noise(v, nv, r, s, query) if plan.check_given else 0.0
     block_nv = nv

@@ -173,16 +173,16 @@ def select(results, radii, points, fallback=0, smooth=SMOOTH_NEIGHBORS):
     return choice.astype(np.int64)
 
 
-def assemble(results, radii, choice):
+def assemble(results, radii, choice, base=0):
     """One CurvatureResult whose row i is row i of ``results[choice[i]]``, with
     ``radius_used`` = ``radii[choice[i]]`` where valid (NaN elsewhere); the other attributes
-    (``radius``, ``orientation``) are those of ``results[0]``."""
+    (``radius``, ``orientation``) are those of ``results[base]``."""
     rows = np.arange(len(choice))
-    middle = results[0]
-    out = type(middle)(**{f: getattr(middle, f) for f in middle.__dataclass_fields__})
+    first = results[base]
+    out = type(first)(**{f: getattr(first, f) for f in first.__dataclass_fields__})
     for name in ("k1", "k2", "d1", "d2", "normals", "valid", "n_neighbors", "n_samples",
                  "residual", "noise", "status", "outlier_score"):
-        if getattr(middle, name) is None:
+        if getattr(first, name) is None:
             continue
         stacked = np.stack([np.asarray(getattr(r, name)) for r in results])
         setattr(out, name, stacked[choice, rows].copy())
@@ -202,7 +202,5 @@ def run_auto(v, f, given_normals, r0, query, plan, progress=False, radii=None,
     results = run_radii(v, f, given_normals, radii, query, plan, progress)
     at_r0 = int(np.argmin(np.abs(np.asarray(radii) - r0)))
     choice = select(results, radii, v[query], fallback=at_r0)
-    out = assemble(results, radii, choice)
-    # the default radius' own attributes: its no-estimate reason and normal orientation note
-    out.radius, out.orientation = float(r0), results[at_r0].orientation
-    return out
+    # the default radius' own attributes: its radius and normal orientation note
+    return assemble(results, radii, choice, base=at_r0)

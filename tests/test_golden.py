@@ -24,7 +24,7 @@ from meshcurv import surfaces
 
 GOLDEN = os.path.join(os.path.dirname(os.path.abspath(__file__)), "golden_hashes.json")
 FIELDS = ("k1", "k2", "d1", "d2", "normals", "valid", "n_neighbors", "n_samples", "residual",
-          "noise")
+          "noise", "status", "outlier_score", "radius_used")
 
 
 def _noisy(points, sigma, seed):

@@ -67,6 +67,42 @@ def test_point_residuals_match_the_numpy_specification():
     assert orders >= {0, 3, 6, 10}
 
 
+def test_clean_neighborhoods_stop_after_the_least_squares_start():
+    """On a clean torus (~46 points per ball, cubic fits) no residual exceeds two robust scales
+    (the scale is floored above them), so the reweighting rounds are skipped: the same bits as
+    no rounds at all, and the specification's. A spike in a ball keeps its rounds: those rows
+    differ from the plain least-squares fit. (Where the model leaves residuals above the floor,
+    e.g. a sphere at radius 0.5, every round runs.)"""
+    s = surfaces.torus(n_major=240, n_minor=60)
+    radius = 0.2
+    indptr, indices = ball_csr(s.vertices, radius)
+    runs = []
+    for iterations in (0, 3):
+        out = tuple(np.empty(len(s.vertices)) for _ in range(3))
+        outliers.point_residuals(s.vertices, s.vertices, indptr, indices, radius, *out,
+                                 iterations=iterations)
+        runs.append(out)
+    for a, b in zip(*runs):
+        np.testing.assert_array_equal(a, b)
+    for i in range(0, len(s.vertices), 331):
+        ref = outliers_spec.point_residual(s.vertices[i],
+                                           s.vertices[indices[indptr[i]:indptr[i + 1]]], radius)
+        assert runs[1][0][i] == pytest.approx(ref[0], rel=1e-8, abs=1e-12)
+        assert runs[1][1][i] == pytest.approx(ref[1], rel=1e-8)
+    v, spikes = with_spikes(s, 0.0, 0.01, seed=5)
+    indptr, indices = ball_csr(v, radius)
+    # rows other than the spikes with a spike in their ball
+    near = np.add.reduceat(spikes[indices].astype(int), indptr[:-1]) > 0
+    near[spikes] = False
+    scales = []
+    for iterations in (0, 3):
+        out = tuple(np.empty(len(v)) for _ in range(3))
+        outliers.point_residuals(v, v, indptr, indices, radius, *out, iterations=iterations)
+        scales.append(out[1])
+    assert np.mean(scales[0][near] != scales[1][near]) > 0.9
+    np.testing.assert_array_equal(scales[0][~near & ~spikes], scales[1][~near & ~spikes])
+
+
 def test_scores_of_gaussian_noise_stay_below_the_cutoff_in_small_and_large_balls():
     """A noisy plane sampled at random, balls of 6 to 60 points: at most one point in a
     thousand flagged (measured <= 3.5e-4 in 9-30 point balls, none beyond). The raw ratio of

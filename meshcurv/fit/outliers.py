@@ -325,10 +325,11 @@ def point_residuals(points, query_points, indptr, indices, radius, residual, sca
     the heights of the k neighbors within ``radius``
     (x itself left out) are fitted by a polynomial in (u, v) (a cubic, or a quadric or plane
     where k is small, :func:`model_terms`: p coefficients; weights ``1 - r^2 / radius^2``),
-    first by least squares, then ``iterations`` times reweighted by Tukey's biweight
+    first by least squares, then up to ``iterations`` times reweighted by Tukey's biweight
     ``(1 - (e / (TUKEY_C s))^2)^2`` of each neighbor's residual e, with s ``MAD_SIGMA`` times
-    the median |e| of the last fit. The scale of the final fit's residuals is their biweight
-    midvariance, times ``sqrt(k / (k - p))`` (the fitted coefficients), at least
+    the median |e| of the last fit, stopping early when no |e| exceeds ``OUTLIER_TRUSTED * s``
+    (no neighbor to down-weight: clean data). The scale of the final fit's residuals is their
+    biweight midvariance, times ``sqrt(k / (k - p))`` (the fitted coefficients), at least
     ``OUTLIER_SCALE_FLOOR * radius``. The residual of x is its height above the final
     fit at x; its scale is s times ``sqrt(1 + c)``, c the variance of the fitted height at x
     per unit noise (``e^T A^-1 B A^-1 e``, A and B the normal matrices of the weights and of
@@ -342,7 +343,7 @@ def point_residuals(points, query_points, indptr, indices, radius, residual, sca
     scale : (m,) float64 output, the robust scale of that residual, model units
     dof : (m,) float64 output, k - p: the residuals the scale was measured from, less the
         fitted coefficients (0 where no fit)
-    iterations : int, reweighting rounds
+    iterations : int, most reweighting rounds
 
     Both are NaN where the fit is singular (fewer than 6 well-spread neighbors) or x is not
     finite.
@@ -413,12 +414,18 @@ def point_residuals(points, query_points, indptr, indices, radius, residual, sca
                 if not solve_sym(mat, rhs, p, sol):
                     ok = False
                     break
+                largest = 0.0
                 for i in range(k):
                     res[i] = abs(uvh[i, 2] - _height(sol, p, uvh[i, 0], uvh[i, 1]))
                     ordered[i] = res[i]
+                    largest = max(largest, res[i])
                 mad = select_median(ordered, k)
                 s = max(MAD_SIGMA * mad * coefficients, OUTLIER_SCALE_FLOOR)
                 if it == iterations:
+                    break
+                # no neighbor beyond OUTLIER_TRUSTED scales: none to down-weight (clean data,
+                # after the least-squares start); the reweighting would only trade efficiency
+                if largest <= OUTLIER_TRUSTED * s:
                     break
                 for i in range(k):
                     z = res[i] / (TUKEY_C * s)

@@ -3,7 +3,7 @@ of one point from a robust (Tukey-reweighted) height fit of its neighbors, and i
 
 import numpy as np
 
-from .constants import OUTLIER_ITERATIONS, OUTLIER_SCALE_FLOOR, TUKEY_C
+from .constants import OUTLIER_ITERATIONS, OUTLIER_SCALE_FLOOR, OUTLIER_TRUSTED, TUKEY_C
 
 __all__ = ["point_residual"]
 
@@ -16,7 +16,8 @@ def point_residual(x, neighbors, radius, iterations=OUTLIER_ITERATIONS):
     Parameters
     ----------
     x : (3,) float; neighbors : (k, 3) float, points beyond ``radius`` and x itself ignored
-    radius : float, model units; iterations : int, Tukey reweighting rounds
+    radius : float, model units; iterations : int, most Tukey reweighting rounds (none
+        more once no residual exceeds ``OUTLIER_TRUSTED`` scales)
 
     Returns
     -------
@@ -58,9 +59,12 @@ def point_residual(x, neighbors, radius, iterations=OUTLIER_ITERATIONS):
         res = np.abs(h - design @ coef)
         s = max(MAD_SIGMA * np.median(res) * np.sqrt(k / (k - p)),
                 OUTLIER_SCALE_FLOOR)
-        if it < iterations:
-            z = res / (TUKEY_C * s)
-            wr = np.where(z < 1.0, (1.0 - z * z) ** 2, 0.0)
+        if it == iterations:
+            break
+        if res.max() <= OUTLIER_TRUSTED * s:
+            break                   # no neighbor to down-weight
+        z = res / (TUKEY_C * s)
+        wr = np.where(z < 1.0, (1.0 - z * z) ** 2, 0.0)
     # biweight midvariance of the final residuals
     u = res / (9.0 * np.median(res))
     inner = u < 1.0

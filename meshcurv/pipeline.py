@@ -18,8 +18,8 @@ from .fit.extrapolate import BIAS_RATIO, extrapolate_to_zero
 from .neighbors import (MAX_BALL_FRACTION, BallGrid, KringWork, ball_counts, ball_grid,
                         ball_neighbors, edge_adjacency, kring_counts, kring_neighbors,
                         spatial_order)
-from .normals import face_vertex_normals, orient, orient_along, orient_like, orient_mst, \
-    orient_towards, pca_normals, sphere_normals
+from .normals import face_normal_error, face_vertex_normals, orient, orient_along, \
+    orient_like, orient_mst, orient_towards, pca_normals, sphere_normals
 from .result import CurvatureResult, Status
 
 __all__ = ["run", "run_radii", "estimate_normals", "weight_blend", "clean_fraction",
@@ -75,6 +75,14 @@ SPARSE_MIN_POINTS = 1
 # Statuses of fits that failed for lack of points.
 SPARSE_STATUSES = (Status.TOO_FEW_NEIGHBORS, Status.TOO_FEW_HALF_SETS, Status.ILL_POSED_FIT,
                    Status.DEGENERATE_DIRECTIONS)
+
+# Tilt (radians) taken as the plane fits' error where ``normal_estimation="auto"`` mixes them
+# with a mesh's face normals, by inverse variance against the face normals' expected tilt
+# (:func:`meshcurv.normals.face_normal_error`). Measured on clean meshes at the default
+# radius: plane fits tilt by 1e-3 .. 2.4e-2 (median; torus, paraboloid, ellipsoid, cylinder;
+# up to 0.18 at the borders, which also tilts the fits of every vertex within a radius of
+# them), face normals by 0 .. 4e-4; noise of 0.1 % of the diagonal tilts face normals by 0.09.
+FACE_MIX_TILT = 1e-2
 
 # Neighbors per point in the graph of the spanning-tree orientation.
 TREE_NEIGHBORS = 10
@@ -331,7 +339,8 @@ def _score_block(score, v, radius, search, pos, indptr, indices):
     score[pos] = outliers.outlier_score(residual, scale, dof)
 
 
-def _outlier_pass(v, f, radius, search, rows, plan, progress, block, face_normals):
+def _outlier_pass(v, f, radius, search, rows, plan, progress, block, face_normals,
+                  face_weight=None):
     """The outlier scores of :func:`outlier_scores` and, from the same neighbor lists (one
     search for all), what else needs every point's neighborhood before the blocks and does
     not depend on the scores: the spanning tree's normals (``plan.normals == "mst"``, when
@@ -366,7 +375,7 @@ def _outlier_pass(v, f, radius, search, rows, plan, progress, block, face_normal
             _tree_block(nv, graph, v, radius, search, pos, indptr, indices)
         if field:
             plain[pos] = _block_normals(None, face_normals, pos, v[pos], indptr, indices,
-                                        radius, search, plan)
+                                        radius, search, plan, face_weight=face_weight)
         del indptr, indices
     return score, (orient_mst(v, nv, neighbors=graph, note=True) if tree else None), plain
 
@@ -432,12 +441,14 @@ def _spanning_tree_normals(v, radius, search, finite, progress, point_weights=No
 
 
 def _start_normals(v, f, given, radius, search, finite, plan, progress, point_weights=None):
-    """``(normals, face_normals, note)`` before the blocks: the given ones, the faces', or the
-    spanning tree's (which needs every normal first); None where blocks estimate their own.
-    ``finite``: the finite rows of ``v`` (ball searches only); ``note``: how the normals get
-    their sign (``CurvatureResult.orientation``)."""
+    """``(normals, face_normals, note, face_weight)`` before the blocks: the given ones, the
+    faces', or the spanning tree's (which needs every normal first); None where blocks
+    estimate their own. ``finite``: the finite rows of ``v`` (ball searches only); ``note``:
+    how the normals get their sign (``CurvatureResult.orientation``); ``face_weight``: the
+    per-vertex weight of the face normals in the blocks' plane-fit normals
+    (:func:`face_weights`), or None."""
     if plan.normals == "given":
-        return given, None, "as given"
+        return given, None, "as given", None
     face_normals = None
     if f is not None:
         with np.errstate(invalid="ignore"):       # NaN vertices give NaN normals
@@ -445,14 +456,30 @@ def _start_normals(v, f, given, radius, search, finite, plan, progress, point_we
     if plan.normals == "mst":
         normals, note = _spanning_tree_normals(v, radius, search, finite, progress,
                                                point_weights)
-        return normals, None, note
+        return normals, None, note, None
     note = ("oriented like the faces" if face_normals is not None else
             "oriented towards +z" if plan.viewpoint is None else "oriented towards the viewpoint")
-    return (face_normals if plan.normals == "faces" else None), face_normals, note
+    weight = (face_weights(v, f, face_normals) if plan.face_mix and face_normals is not None
+              else None)
+    return (face_normals if plan.normals == "faces" else None), face_normals, note, weight
+
+
+def face_weights(v, f, face_normals):
+    """Weights (n,) in [0, 1] of the face normals ``face_normals`` against plane fits, by
+    inverse variance: ``t^2 / (t^2 + e^2)``, t = :data:`FACE_MIX_TILT` the plane fits' error,
+    e the face normals' expected tilt (:func:`meshcurv.normals.face_normal_error`). About 1
+    on smooth meshes however coarse (where plane fits tilt with the curvature across an
+    uneven or truncated ball), towards 0 on noisy ones (noise of 0.1 % of the diagonal on a
+    torus 240 x 60: ~0.01); 0 where the face normals' error is not known."""
+    error = face_normal_error(v, f, face_normals)
+    t2 = FACE_MIX_TILT * FACE_MIX_TILT
+    with np.errstate(invalid="ignore"):
+        weight = t2 / (t2 + error * error)
+    return np.where(np.isfinite(weight), weight, 0.0)
 
 
 def _pca_field(v, face_normals, search, finite, radius, plan, progress, point_weights=None,
-               plain=None):
+               plain=None, face_weight=None):
     """The block normals of every vertex before the blocks (:func:`_block_normals`' plane
     fits), for the normal-aware circle fits: (n, 3), NaN where the neighborhood is too small.
     Measured, on noisy meshes these normals serve the circle fits far better than the face
@@ -478,7 +505,7 @@ def _pca_field(v, face_normals, search, finite, radius, plan, progress, point_we
     for pos in blocks(rows, progress, "normals", block_size(search, rows, radius, "points")):
         indptr, indices = search.neighbors(pos)
         nv[pos] = _block_normals(None, face_normals, pos, v[pos], indptr, indices, radius,
-                                 search, plan, point_weights)
+                                 search, plan, point_weights, face_weight)
     return nv
 
 
@@ -496,15 +523,21 @@ def _near_points(v, centres, rows, radius):
 
 
 def _block_normals(nv, face_normals, idx, xb, indptr, indices, radius, search, plan,
-                   point_weights=None):
+                   point_weights=None, face_weight=None):
     """Unit normals of one block: taken from ``nv``, or PCA plane fits oriented like the face
-    normals, towards the viewpoint or towards +z."""
+    normals (and mixed with them by ``face_weight``, by vertex, where given), towards the
+    viewpoint or towards +z."""
     if nv is not None:
         qb = nv[idx]
     else:
         qb = pca_normals(search.points, xb, indptr, indices, radius, point_weights)
         if face_normals is not None:
             orient_like(qb, face_normals[idx])
+            if face_weight is not None:
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    qb /= np.linalg.norm(qb, axis=1, keepdims=True)
+                mixed = qb + face_weight[idx, None] * (face_normals[idx] - qb)
+                qb = np.where(np.isfinite(mixed), mixed, qb)
         elif plan.viewpoint is not None:
             orient_towards(qb, xb, plan.viewpoint)
         else:
@@ -706,7 +739,7 @@ def run_radii(v, f, given_normals, radii, query, plan, progress=False):
         for out, sc in zip(outs, scales):
             indptr, indices = sc.search.neighbors(idx) if plan.use_kring else lists
             qb = _block_normals(sc.block_normals, sc.face_normals, idx, xb, indptr, indices,
-                                sc.radius, sc.search, plan, sc.weights)
+                                sc.radius, sc.search, plan, sc.weights, sc.face_weight)
             _fit_block(out, pos, xb, qb, indptr, indices, sc.radius, sc.search, plan,
                        sc.given_a2, sc.field, sc.weights)
             del indptr, indices
@@ -716,7 +749,7 @@ def run_radii(v, f, given_normals, radii, query, plan, progress=False):
         if plan.sparse_retry:
             # retried rows get normals of their own, wider balls (not this radius' field)
             retry_sparse(out, v, f, sc.start_normals, sc.face_normals, sc.radius, query, plan,
-                         sc.search)
+                         sc.search, sc.face_weight)
         if sc.score is not None:
             out.outlier_score[:] = sc.score[query]
             out.flag_outliers()
@@ -730,7 +763,8 @@ class _Scale(NamedTuple):
     """What the blocks of one radius use (:func:`_prepare_scale`): the radius and its search;
     the outlier ``score`` (by vertex) and ``weights`` (by row of ``search.points``), None
     without the outlier pass; ``start_normals``, ``face_normals`` and ``note`` of
-    :func:`_start_normals`; ``block_normals``, the same or the plane-fit field of
+    :func:`_start_normals` (and its ``face_weight``); ``block_normals``, the same or the
+    plane-fit field of
     :func:`_pca_field`; ``given_a2`` (:func:`given_normal_noise`); ``field``, the neighbors'
     normals of the normal-aware fits (:func:`_normal_field`) or None."""
 
@@ -744,6 +778,7 @@ class _Scale(NamedTuple):
     block_normals: object
     given_a2: float
     field: object
+    face_weight: object = None
 
 
 def _prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progress):
@@ -756,21 +791,22 @@ def _prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progre
         # scores by vertex; weights by row of s.points (the grid's order where it has one);
         # the same lists give the spanning tree's or the unweighted plane-fit normals
         rows = _scored_rows(v, s, query, finite, block, plan)
-        score, tree, plain = _outlier_pass(v, f, r, s, rows, plan, progress, block,
-                                           None if start is None else start[1])
+        faces = (None, None) if start is None else (start[1], start[3])
+        score, tree, plain = _outlier_pass(v, f, r, s, rows, plan, progress, block, *faces)
         weight = outliers.outlier_weight(score)
         weights = weight if s.rank is None else weight[s.rank]
     if start is None:
         # the spanning tree's normals unweighted (from the outlier pass's lists, or their own):
         # they are estimate_normals', which tiled runs share between tiles (the weighted local
         # jet refines them)
-        start = ((tree[0], None, tree[1]) if tree is not None else
+        start = ((tree[0], None, tree[1], None) if tree is not None else
                  _start_normals(v, f, given_normals, r, s, finite, plan, progress))
-    nv, face_normals, note = start
+    nv, face_normals, note, face_weight = start
     given_a2 = given_normal_noise(v, nv, r, s, query) if plan.check_given else 0.0
     block_nv = nv
     if plan.normal_constraints and nv is None:
-        block_nv = _pca_field(v, face_normals, s, finite, r, plan, progress, weights, plain)
+        block_nv = _pca_field(v, face_normals, s, finite, r, plan, progress, weights, plain,
+                              face_weight)
     field = block_nv
     if (plan.normal_constraints and weights is not None and plan.refine
             and nv is not None and np.any(weights < 1.0)):
@@ -784,7 +820,7 @@ def _prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progre
                      if tree is not None else None)
         field = _pca_field(v, nv, s, finite, r, plan, progress, weights, plain)
     return _Scale(r, s, score, weights, nv, face_normals, note, block_nv, given_a2,
-                  _normal_field(field, s, plan))
+                  _normal_field(field, s, plan), face_weight)
 
 
 def _needs_support(out, plan):
@@ -810,7 +846,8 @@ def _reference_normals(nv, trusted, rank, indptr, indices):
     return ref
 
 
-def _refit(v, idx, nv, face_normals, r, search, plan, own_normals, trusted=None):
+def _refit(v, idx, nv, face_normals, r, search, plan, own_normals, trusted=None,
+           face_weight=None):
     """:class:`_Outputs` of the vertices ``idx`` at radius ``r`` over ``search``. Normals: the
     given or face ones (``nv``); else plane fits over the ball of ``r``, oriented like the
     faces, the viewpoint or, for spanning-tree normals (``own_normals`` False), the
@@ -829,7 +866,7 @@ def _refit(v, idx, nv, face_normals, r, search, plan, own_normals, trusted=None)
                 qb /= np.linalg.norm(qb, axis=1, keepdims=True)
         else:
             qb = _block_normals(nv, face_normals, idx[pos], xb, indptr, indices, r, search,
-                                plan)
+                                plan, face_weight=face_weight)
         _fit_block(sub, pos, xb, qb, indptr, indices, r, search, plan)
     return sub
 
@@ -841,7 +878,7 @@ def _take(out, rows, sub, done):
         getattr(out, name)[rows[done]] = getattr(sub, name)[done]
 
 
-def retry_sparse(out, v, f, nv, face_normals, radius, query, plan, search):
+def retry_sparse(out, v, f, nv, face_normals, radius, query, plan, search, face_weight=None):
     """Re-estimate, in place, the rows of ``out`` that had too few points (:func:`_needs_support`).
 
     First at ``SPARSE_FACTORS`` times ``radius``, each row at the first factor whose fit
@@ -853,6 +890,7 @@ def retry_sparse(out, v, f, nv, face_normals, radius, query, plan, search):
     spheres), 5 or more of them averaged by the Euler fit. ``search`` is the search of
     ``radius``. Rows nothing serves keep their estimate, except on clouds with estimated
     normals, where an estimate from fewer than 11 points has no checked normal and is dropped.
+    ``face_weight``: as in :func:`_block_normals`.
     """
     rows = _needs_support(out, plan)
     if not len(rows):
@@ -886,7 +924,7 @@ def retry_sparse(out, v, f, nv, face_normals, radius, query, plan, search):
             continue
         sub = _refit(v, query[local], reference if reference is not None else nv,
                      face_normals, radius * factor, search_at(factor), how,
-                     how is sparse and factor == 1.0, trusted)
+                     how is sparse and factor == 1.0, trusted, face_weight)
         done = (sub.status == Status.OK) & ((sub.n_neighbors <= most) | (factor == 1.0))
         if how is sparse and not plan.use_kring:
             # one-point half-sets of a cloud only where the cubic fit checked the normal; a

@@ -556,6 +556,8 @@ class _Outputs:
         self.n_neighbors = np.zeros(m, dtype=np.int32)
         self.status = np.zeros(m, dtype=np.int8)
         self.outlier_score = np.full(m, np.nan)
+        # the radius of each row's estimate, as a multiple of the call's (retried rows: more)
+        self.radius_factor = np.ones(m)
 
     def flag_outliers(self):
         """No curvature, status OUTLIER, where the outlier score reaches the Tukey cutoff (the
@@ -575,7 +577,8 @@ class _Outputs:
                                n_neighbors=self.n_neighbors, n_samples=self.n_samples,
                                residual=self.residual, noise=self.noise, radius=radius,
                                status=self.status, outlier_score=self.outlier_score,
-                               radius_used=np.where(valid, float(radius), np.nan))
+                               radius_used=np.where(valid, float(radius) * self.radius_factor,
+                                                    np.nan))
 
 
 def _normal_field(nv, search, plan):
@@ -931,6 +934,7 @@ def retry_sparse(out, v, f, nv, face_normals, radius, query, plan, search, face_
             # mesh's rings are its own neighborhoods (an icosahedron's 1-ring: 5 points)
             done &= np.isfinite(sub.noise)
         _take(out, local, sub, done)
+        out.radius_factor[local[done]] = factor
         if reference is not None:
             oriented = done & np.isfinite(sub.noise)
             trusted[query[local[oriented]]] = True

@@ -174,20 +174,22 @@ def select(results, radii, points, fallback=0, smooth=SMOOTH_NEIGHBORS):
 
 
 def assemble(results, radii, choice, base=0):
-    """One CurvatureResult whose row i is row i of ``results[choice[i]]``, with
-    ``radius_used`` = ``radii[choice[i]]`` where valid (NaN elsewhere); the other attributes
-    (``radius``, ``orientation``) are those of ``results[base]``."""
+    """One CurvatureResult whose row i is row i of ``results[choice[i]]``, ``radius_used``
+    included (``radii[choice[i]]``, or more where the sparse retry widened that row's ball;
+    NaN where not valid; ``radii[choice[i]]`` where the results have none); the other attributes (``radius``, ``orientation``) are those of
+    ``results[base]``."""
     rows = np.arange(len(choice))
     first = results[base]
     out = type(first)(**{f: getattr(first, f) for f in first.__dataclass_fields__})
     for name in ("k1", "k2", "d1", "d2", "normals", "valid", "n_neighbors", "n_samples",
-                 "residual", "noise", "status", "outlier_score"):
+                 "residual", "noise", "status", "outlier_score", "radius_used"):
         if getattr(first, name) is None:
             continue
         stacked = np.stack([np.asarray(getattr(r, name)) for r in results])
         setattr(out, name, stacked[choice, rows].copy())
-    used = np.asarray(radii, dtype=np.float64)[choice]
-    out.radius_used = np.where(out.valid, used, np.nan)
+    if first.radius_used is None:        # producers that do not tell: the ladder's radius
+        used = np.asarray(radii, dtype=np.float64)[choice]
+        out.radius_used = np.where(out.valid, used, np.nan)
     return out
 
 

@@ -137,6 +137,25 @@ def test_retry_can_be_switched_off():
                                        Status.DEGENERATE_DIRECTIONS]))
 
 
+def test_retried_rows_report_the_radius_they_were_estimated_at():
+    """Rows the retry re-estimated at a wider ball say so in ``radius_used``: the call's radius
+    times one of SPARSE_FACTORS (or 1 for the one-point half-sets at the radius itself);
+    rows the retry left as they were keep the call's radius."""
+    from meshcurv.pipeline import SPARSE_FACTORS
+
+    p = falling_density_cap(15, n=4000)
+    off = meshcurv.principal_curvatures(p, sparse_retry=False)
+    on = meshcurv.principal_curvatures(p)
+    factor = on.radius_used / on.radius
+    kept = off.valid & on.valid & (off.k1 == on.k1)
+    np.testing.assert_array_equal(factor[kept], 1.0)
+    retried = on.valid & ~off.valid
+    assert retried.any()
+    assert np.all(np.isin(np.round(factor[retried], 12), (1.0,) + SPARSE_FACTORS))
+    assert np.any(factor[retried] > 1.0)
+    assert np.all(np.isnan(on.radius_used[~on.valid]))
+
+
 @pytest.mark.parametrize("subdivisions", [0, 1, 2])
 @pytest.mark.parametrize("sphere_radius", [1.0, 2.5])
 def test_icosphere_gives_one_over_r_on_every_vertex(subdivisions, sphere_radius):

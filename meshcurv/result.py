@@ -80,9 +80,9 @@ class CurvatureResult:
         neighbors), or None where the producer does not tell
     radius_used : (n,) float64, the neighborhood radius of the row's estimate, model units:
         ``radius`` for a fixed radius, the radius each vertex chose with ``radius="auto"``
-        (:mod:`meshcurv.scale`); NaN where ``valid`` is False. ``sparse_retry`` may have
-        widened the ball of a row that had too few points (its ``n_neighbors`` tells). None
-        where the producer does not tell (then ``radius`` where valid)
+        (:mod:`meshcurv.scale`), the wider radius where ``sparse_retry`` re-estimated a row
+        that had too few points; NaN where ``valid`` is False. None where the producer does
+        not tell (then ``radius`` where valid)
     """
 
     k1: np.ndarray

@@ -68,11 +68,11 @@ def test_point_residuals_match_the_numpy_specification():
 
 
 def test_clean_neighborhoods_stop_after_the_least_squares_start():
-    """On a clean torus (~46 points per ball, cubic fits) no residual exceeds two robust scales
+    """On a clean torus (~46 points per ball, cubic fits) no residual reaches TUKEY_C scales
     (the scale is floored above them), so the reweighting rounds are skipped: the same bits as
     no rounds at all, and the specification's. A spike in a ball keeps its rounds: those rows
-    differ from the plain least-squares fit. (Where the model leaves residuals above the floor,
-    e.g. a sphere at radius 0.5, every round runs.)"""
+    differ from the plain least-squares fit. (Where the cubic leaves residuals of its own above
+    the floor, e.g. a sphere at radius 0.5, 30 % of the balls still run their rounds.)"""
     s = surfaces.torus(n_major=240, n_minor=60)
     radius = 0.2
     indptr, indices = ball_csr(s.vertices, radius)

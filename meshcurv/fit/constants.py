@@ -46,9 +46,12 @@ OUTLIER_TRUSTED = 2.0
 
 # Reweighting rounds of that robust fit after its least-squares start (measured: the spike
 # residuals and the scale settle after 2-3; the default weights change by < 1e-3 beyond 3),
-# fewer where no residual exceeds OUTLIER_TRUSTED scales (nothing to down-weight: clean data
-# stop after the start; Gaussian noise leaves all of 100 residuals within two sigmas in 1 %
-# of the neighborhoods).
+# none where no residual of the least-squares start reaches TUKEY_C robust scales: no neighbor
+# the biweight would reject, so the efficient least-squares fit stands. Clean data and
+# Gaussian noise stop there (a residual of 4.685 sigmas in 3 of a million: 3 in 10,000 balls
+# of 100 points); a ball holding a spike keeps every round. Measured against always four
+# rounds: surfaces, spikes (100 % flagged), density and icosahedra cases and the benchmark
+# clouds at noise 0.1-0.2 unchanged to 4 digits; the pass 2.9x faster on a noisy torus.
 OUTLIER_ITERATIONS = 3
 
 # Least robust scale of that pass, as a fraction of the radius: on clean samples the cubic's

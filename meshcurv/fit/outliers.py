@@ -327,8 +327,8 @@ def point_residuals(points, query_points, indptr, indices, radius, residual, sca
     where k is small, :func:`model_terms`: p coefficients; weights ``1 - r^2 / radius^2``),
     first by least squares, then up to ``iterations`` times reweighted by Tukey's biweight
     ``(1 - (e / (TUKEY_C s))^2)^2`` of each neighbor's residual e, with s ``MAD_SIGMA`` times
-    the median |e| of the last fit, stopping early when no |e| exceeds ``OUTLIER_TRUSTED * s``
-    (no neighbor to down-weight: clean data). The scale of the final fit's residuals is their
+    the median |e| of the last fit - none when no |e| of the start reaches ``TUKEY_C * s``
+    (no neighbor to reject: clean data, Gaussian noise). The scale of the final fit's residuals is their
     biweight midvariance, times ``sqrt(k / (k - p))`` (the fitted coefficients), at least
     ``OUTLIER_SCALE_FLOOR * radius``. The residual of x is its height above the final
     fit at x; its scale is s times ``sqrt(1 + c)``, c the variance of the fitted height at x
@@ -423,9 +423,9 @@ def point_residuals(points, query_points, indptr, indices, radius, residual, sca
                 s = max(MAD_SIGMA * mad * coefficients, OUTLIER_SCALE_FLOOR)
                 if it == iterations:
                     break
-                # no neighbor beyond OUTLIER_TRUSTED scales: none to down-weight (clean data,
-                # after the least-squares start); the reweighting would only trade efficiency
-                if largest <= OUTLIER_TRUSTED * s:
+                # no neighbor at the biweight's rejection point: none to reject (clean data,
+                # Gaussian noise); the reweighting would only trade efficiency
+                if largest <= TUKEY_C * s:
                     break
                 for i in range(k):
                     z = res[i] / (TUKEY_C * s)

@@ -3,7 +3,7 @@ of one point from a robust (Tukey-reweighted) height fit of its neighbors, and i
 
 import numpy as np
 
-from .constants import OUTLIER_ITERATIONS, OUTLIER_SCALE_FLOOR, OUTLIER_TRUSTED, TUKEY_C
+from .constants import OUTLIER_ITERATIONS, OUTLIER_SCALE_FLOOR, TUKEY_C
 
 __all__ = ["point_residual"]
 
@@ -17,7 +17,7 @@ def point_residual(x, neighbors, radius, iterations=OUTLIER_ITERATIONS):
     ----------
     x : (3,) float; neighbors : (k, 3) float, points beyond ``radius`` and x itself ignored
     radius : float, model units; iterations : int, most Tukey reweighting rounds (none
-        more once no residual exceeds ``OUTLIER_TRUSTED`` scales)
+        more once no residual reaches ``TUKEY_C`` scales)
 
     Returns
     -------
@@ -61,7 +61,7 @@ def point_residual(x, neighbors, radius, iterations=OUTLIER_ITERATIONS):
                 OUTLIER_SCALE_FLOOR)
         if it == iterations:
             break
-        if res.max() <= OUTLIER_TRUSTED * s:
+        if res.max() <= TUKEY_C * s:
             break                   # no neighbor to down-weight
         z = res / (TUKEY_C * s)
         wr = np.where(z < 1.0, (1.0 - z * z) ** 2, 0.0)

@@ -55,6 +55,10 @@ _UP = np.array([0.0, 0.0, 1.0])
 # The jet measures clean samples at 0.5e-5 .. 0.9e-4 of the radius (sphere, paraboloid,
 # torus), noise of 0.01 % of the diagonal at 1e-3 and more.
 BIAS_NOISE_SCALE = 2.5e-4
+# Least share of the bias correction for which the second, smaller fit is run: below it (noise
+# above ~5.6 BIAS_NOISE_SCALE) the correction would move the estimate by less than 1/500 of
+# the two fits' difference, itself mostly the smaller fit's noise there.
+BIAS_MIN_GAIN = 1e-3
 # Tilt (radians) of given normals from the local quadric's at which the bias correction is
 # applied half: exact normals of clean samples tilt from the quadric's by its own error (a few
 # 1e-3 where the curvature varies inside the ball: Table 2 paraboloid at radius 2), normals
@@ -659,15 +663,28 @@ def _bias_corrected(search, xb, qb, indptr, indices, radius, blend, plan, large,
     weight profile; the
     half-frequency Euler model, which absorbs what a tilted normal does to opposite half-sets
     of a smaller, more unevenly filled ball), mixed in by the measured ``noise``
-    (:func:`clean_fraction` at :data:`BIAS_NOISE_SCALE`). ``quadric``: the local quadric's
-    normals about ``qb`` (see :func:`_tilt`) where already fitted, else None."""
+    (:func:`clean_fraction` at :data:`BIAS_NOISE_SCALE`). Rows whose noise leaves less than
+    :data:`BIAS_MIN_GAIN` of the correction keep ``large`` as it is, without the second fit.
+    ``quadric``: the local quadric's normals about ``qb`` (see :func:`_tilt`) where already
+    fitted, else None."""
+    gain = clean_fraction(noise, BIAS_NOISE_SCALE * radius)
+    rows = np.flatnonzero(gain >= BIAS_MIN_GAIN)
+    if len(rows) == 0:
+        return large
+    everything = len(rows) == len(xb)
+    if not everything:
+        indptr, indices = _csr_rows(indptr, indices, rows)
+        xb, qb, blend, gain, large_samples = (a[rows] for a in (xb, qb, blend, gain,
+                                                                  large_samples))
+        constraints = tuple(c[rows] if i in (1, 2) and c is not None else c
+                            for i, c in enumerate(constraints))
+        quadric = None if quadric is None else quadric[rows]
     b = len(xb)
     small = tuple(np.empty(b) for _ in range(2)) + tuple(np.empty((b, 3)) for _ in range(2))
     scratch = (np.empty(b), np.empty(b), np.empty(b), np.empty(b, dtype=np.int8))
     fused.curvature_cga(search.points, xb, qb, indptr, indices, radius * BIAS_RATIO, blend,
                         plan.fit[:6] + (True,) + plan.fit[7:], small + scratch, search.rank,
                         *constraints)
-    gain = clean_fraction(noise, BIAS_NOISE_SCALE * radius)
     # only where the smaller ball saw every direction the larger one did: where a sparse or
     # clumpy sampling leaves half-sets of the smaller ball empty, its fit is no measurement of
     # the bias (clumpy torus: max |dk| 0.39 -> 1.7 with the correction applied there)
@@ -678,7 +695,24 @@ def _bias_corrected(search, xb, qb, indptr, indices, radius, blend, plan, large,
         # doubles (benchmark clouds, clean points, normal noise 0.1: mean |dH| 0.006 -> 0.018)
         gain = gain * clean_fraction(_tilt(search, xb, qb, indptr, indices, radius,
                                            constraints[-1], quadric), BIAS_TILT_SCALE)
-    return extrapolate_to_zero(large, small, qb, gain)
+    corrected = extrapolate_to_zero(tuple(a if everything else a[rows] for a in large),
+                                    small, qb, gain)
+    if everything:
+        return corrected
+    out = tuple(a.copy() for a in large)
+    for a, c in zip(out, corrected):
+        a[rows] = c
+    return out
+
+
+def _csr_rows(indptr, indices, rows):
+    """The CSR lists ``(indptr, indices)`` of the rows ``rows`` (ascending int array) only."""
+    lengths = indptr[rows + 1] - indptr[rows]
+    sub_ptr = np.zeros(len(rows) + 1, dtype=indptr.dtype)
+    np.cumsum(lengths, out=sub_ptr[1:])
+    # entry j of the sub-lists is entry j - sub_ptr[row] + indptr[row] of the lists
+    shift = np.repeat(indptr[rows] - sub_ptr[:-1], lengths)
+    return sub_ptr, indices[np.arange(sub_ptr[-1], dtype=indptr.dtype) + shift]
 
 
 def _tilt(search, xb, qb, indptr, indices, radius, point_weights, fitted=None):

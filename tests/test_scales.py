@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import meshcurv
-from meshcurv import surfaces
+from meshcurv import pipeline, surfaces
 from meshcurv.fit.extrapolate import BIAS_RATIO, extrapolate_to_zero
 
 
@@ -94,3 +94,25 @@ def test_bias_correction_leaves_noisy_data_as_they_were(make, radius):
     np.testing.assert_allclose(on.k1, off.k1, rtol=0, atol=1e-4)
     np.testing.assert_allclose(on.k2, off.k2, rtol=0, atol=1e-4)
     np.testing.assert_array_equal(on.valid, off.valid)
+    # where the correction's share is below BIAS_MIN_GAIN the second fit is not run at all:
+    # those rows are the uncorrected estimate bit for bit (here nearly every row)
+    gain = pipeline.clean_fraction(on.noise, pipeline.BIAS_NOISE_SCALE * radius)
+    skipped = gain < pipeline.BIAS_MIN_GAIN
+    assert skipped.mean() > 0.9
+    np.testing.assert_array_equal(on.k1[skipped], off.k1[skipped])
+    np.testing.assert_array_equal(on.d1[skipped], off.d1[skipped])
+
+
+def test_csr_rows_are_the_lists_of_those_rows():
+    rng = np.random.default_rng(2)
+    lengths = rng.integers(0, 6, 50)
+    indptr = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64)
+    indices = rng.integers(0, 1000, indptr[-1])
+    rows = np.flatnonzero(rng.uniform(size=50) < 0.4)
+    sub_ptr, sub = pipeline._csr_rows(indptr, indices, rows)
+    assert len(sub_ptr) == len(rows) + 1
+    for k, i in enumerate(rows):
+        np.testing.assert_array_equal(sub[sub_ptr[k]:sub_ptr[k + 1]],
+                                      indices[indptr[i]:indptr[i + 1]])
+    empty_ptr, empty = pipeline._csr_rows(indptr, indices, rows[:0])
+    assert empty_ptr.tolist() == [0] and len(empty) == 0

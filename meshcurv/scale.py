@@ -6,12 +6,16 @@ radius R0 (:func:`ladder`; one neighbor search over the largest ball,
 :func:`meshcurv.pipeline.run_radii`). At each vertex and radius the squared error of (k1, k2)
 is modelled as variance plus squared bias,
 
-    E_j = V_j + B_j,    V_j = NOISE_GAIN sigma_j^2 / (r_j^4 N_j),    B_j = (a r_j^2)^2,
+    E_j = V_j + B_j,    V_j = NOISE_GAIN sigma_j^2 / (r_j^4 N_j) + NORMAL_GAIN a2 / (r_j^2 N_j),
+    B_j = (a r_j^2)^2,
 
 - V: a height noise sigma_j along the normal (``CurvatureResult.noise``, the local jet's RMS
   residual at r_j) averaged over the N_j points of the ball (least squares of h = k r^2 / 2
   over a disc: var(k) ~ sigma^2 / (N r^4)); NOISE_GAIN measured on noisy spheres, where the
-  error is all variance.
+  error is all variance. With normals used as given, their noise adds its own term: a2 the
+  variance per tangent component of the given normals' noise
+  (:func:`meshcurv.pipeline.given_normal_noise`, 0 for exact ones), whose rows in the circle
+  fits measure the curvature as a slope over the ball (var(k) ~ a2 / (N r^2)).
 - B: the circle model's error where curvature varies, ~ a r^2. From two neighboring radii,
   k(r_j) - k(r_j / sqrt 2) = a r_j^2 / 2, so B_j = 4 d_j^2 with d_j the RMS change of (k1, k2)
   between them, less what the noise puts in that change (nested least-squares estimates
@@ -28,9 +32,6 @@ tube sees a smaller one). Where no radius is admissible the valid one of least e
 is taken; a radius whose row has no estimate is never taken while another radius has one; a
 vertex R0 flags as an outlier keeps R0's row. Every field of the result's row is that
 radius' row, and ``radius_used`` says which.
-
-Not modelled: the noise of given normals (the variance term sees only the positions' noise,
-so clean points with noisy normals get too small a ball).
 """
 
 import numpy as np
@@ -40,8 +41,8 @@ from . import pipeline
 from .neighbors import power_of_two_scale, typical_extent
 from .result import Status
 
-__all__ = ["ladder", "select", "run_auto", "LADDER_EXPONENTS", "NOISE_GAIN", "MIN_SUPPORT",
-           "MAX_ARC", "SMOOTH_NEIGHBORS"]
+__all__ = ["ladder", "select", "run_auto", "LADDER_EXPONENTS", "NOISE_GAIN", "NORMAL_GAIN",
+           "MIN_SUPPORT", "MAX_ARC", "SMOOTH_NEIGHBORS"]
 
 # Ladder r_j = R0 * 2^(j / 2): from half the default ball's points (~50) to 8 times (~800;
 # what position noise needs to draw level with estimators using normals, issue 15).
@@ -51,6 +52,11 @@ LADDER_EXPONENTS = (-1, 0, 1, 2, 3)
 # diagonal, ~40-360 neighbors) lies between 4 and 14 (distance weights, at the lower noise, at
 # the upper end); the middle of that range.
 NOISE_GAIN = 8.0
+# Variance of (k1, k2) per a2 / (r^2 N), a2 the given normals' noise variance: the mean
+# squared error with noisy given normals less that with exact ones, over the same ratio,
+# measured on the benchmark clouds (torus 10k and 25k, Goursat 25k; normal noise 0.1 and 0.2,
+# clean points) at 0.7-1.4 times the default radius lies between 2.5 and 9.3; the middle.
+NORMAL_GAIN = 6.0
 # Fewest neighbors of an admissible ball: below, the circle fits' half-sets hold one or two
 # points and the jet measuring the noise has none to spare.
 MIN_SUPPORT = 20
@@ -73,10 +79,11 @@ def _stack(results, name):
     return np.stack([np.asarray(getattr(r, name), dtype=np.float64) for r in results])
 
 
-def error_terms(results, radii):
+def error_terms(results, radii, normal_var=0.0):
     """Per radius and row ((J, q) float64 each): the variance term V_j and the squared-bias
     term B_j of the module docstring (NaN where not estimated; B_j may be negative, the
-    noise-corrected change being an unbiased but noisy estimate)."""
+    noise-corrected change being an unbiased but noisy estimate); ``normal_var``: a2, the
+    given normals' noise variance (radians^2; 0 without)."""
     r = np.asarray(radii, dtype=np.float64)[:, None]
     k1, k2 = _stack(results, "k1"), _stack(results, "k2")
     n = np.maximum(_stack(results, "n_neighbors"), 1.0)
@@ -88,7 +95,7 @@ def error_terms(results, radii):
         typical = np.where(known.any(axis=0), np.nanmax(np.where(known, sigma, -np.inf),
                                                          axis=0), 0.0)
         sigma = np.where(known, sigma, typical)
-        var = NOISE_GAIN * sigma ** 2 / (r ** 4 * n)
+        var = NOISE_GAIN * sigma ** 2 / (r ** 4 * n) + NORMAL_GAIN * normal_var / (r ** 2 * n)
         var = np.where(np.isfinite(k1), var, np.nan)
         d2 = 0.5 * ((k1[1:] - k1[:-1]) ** 2 + (k2[1:] - k2[:-1]) ** 2)
         noise_part = np.maximum(var[:-1] - var[1:], 0.0)
@@ -132,7 +139,7 @@ def _smoothed(terms, points, k):
     return out
 
 
-def select(results, radii, points, fallback=0, smooth=SMOOTH_NEIGHBORS):
+def select(results, radii, points, fallback=0, smooth=SMOOTH_NEIGHBORS, normal_var=0.0):
     """Index into ``radii`` per row (q,) int64: the admissible radius of least estimated error
     (module docstring); where none is admissible the valid one of least error; where no
     radius has an estimate ``fallback``.
@@ -141,8 +148,8 @@ def select(results, radii, points, fallback=0, smooth=SMOOTH_NEIGHBORS):
     ((q, 3), the query positions the averaging uses); ``fallback``: the index of the default
     radius, which is admissible wherever it is valid (the choice then never needs to be
     worse than the default), whose curvature bounds the larger radii (MAX_ARC) and whose
-    outliers stay outliers (its row is taken)."""
-    var, bias = error_terms(results, radii)
+    outliers stay outliers (its row is taken); ``normal_var``: see :func:`error_terms`."""
+    var, bias = error_terms(results, radii, normal_var)
     error = _smoothed(var, points, smooth) + np.maximum(_smoothed(bias, points, smooth), 0.0)
     valid = np.stack([np.asarray(r.valid, dtype=bool) for r in results])
     support = _stack(results, "n_neighbors") >= MIN_SUPPORT
@@ -193,6 +200,20 @@ def assemble(results, radii, choice, base=0):
     return out
 
 
+def _given_normal_variance(v, f, given_normals, r0, query, plan):
+    """a2 of :func:`meshcurv.pipeline.given_normal_noise` at the default radius where the
+    normals are used as given (0.0 otherwise: estimated or refined normals carry the
+    positions' noise, which the jet measures, and ``refine_normals="auto"`` already mixes
+    noisy given normals with fitted ones)."""
+    if plan.normals != "given" or plan.refine or plan.check_given:
+        return 0.0
+    if plan.use_kring:
+        search = pipeline.kring_search(v, f, r0)
+    else:
+        search = pipeline.ball_search(v, np.flatnonzero(np.isfinite(v).all(axis=1)), r0)
+    return pipeline.given_normal_noise(v, given_normals, r0, search, query)
+
+
 def run_auto(v, f, given_normals, r0, query, plan, progress=False, radii=None,
              run_radii=pipeline.run_radii):
     """The per-vertex scale estimate around the default radius ``r0`` (model units): one
@@ -203,6 +224,7 @@ def run_auto(v, f, given_normals, r0, query, plan, progress=False, radii=None,
     radii = ladder(r0) if radii is None else list(radii)
     results = run_radii(v, f, given_normals, radii, query, plan, progress)
     at_r0 = int(np.argmin(np.abs(np.asarray(radii) - r0)))
-    choice = select(results, radii, v[query], fallback=at_r0)
+    choice = select(results, radii, v[query], fallback=at_r0,
+                    normal_var=_given_normal_variance(v, f, given_normals, r0, query, plan))
     # the default radius' own attributes: its radius and normal orientation note
     return assemble(results, radii, choice, base=at_r0)

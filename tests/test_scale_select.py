@@ -139,6 +139,25 @@ def test_too_little_support_or_too_large_an_arc_is_avoided():
     assert np.all(scale.select(results, radii, pts, fallback=1) == 1)
 
 
+def test_given_normal_noise_adds_its_variance_and_favours_larger_balls():
+    """The variance term gains NORMAL_GAIN a2 / (r^2 N) with a2 the given normals' noise; with
+    the same curvature at every radius (no bias) and clean points, noisy given normals make
+    the largest admissible ball the choice, exact ones keep the default."""
+    q = 12
+    pts = np.column_stack([np.arange(q, dtype=float), np.zeros(q), np.zeros(q)])
+    radii = [0.5, 1.0, 2.0]
+    ok = np.ones(q, dtype=bool)
+    results = [_result(np.full(q, 0.2), ok, n, noise=0.0, radius=r)
+               for r, n in zip(radii, (25, 100, 400))]
+    var0, _ = scale.error_terms(results, radii)
+    var, _ = scale.error_terms(results, radii, normal_var=0.01)
+    expected = scale.NORMAL_GAIN * 0.01 / (np.array(radii) ** 2 * [25, 100, 400])
+    np.testing.assert_allclose(var - var0, np.repeat(expected[:, None], q, axis=1))
+    assert np.all(scale.select(results, radii, pts, fallback=1, normal_var=0.01) == 2)
+    # no variance at all: every radius ties at zero error and the first (smallest) is taken
+    assert np.all(scale.select(results, radii, pts, fallback=1) == 0)
+
+
 def test_fixed_radius_reports_it_per_row_and_writers_carry_radius_used():
     s = surfaces.sphere(1.0, 3)
     res = meshcurv.principal_curvatures(s.vertices, s.faces, radius=0.4)

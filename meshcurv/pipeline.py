@@ -643,20 +643,23 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2
         field_of_points, noise,
         np.ones(b) if plan.normals == "given" and not plan.refine else
         np.where(np.isfinite(noise), 1.0 - beta, 0.0))
+    # the normal rows' weight each fit measured: the bias correction's smaller fit takes the
+    # same, so the two radii fit the same combination of rows and their bias scales alike
+    row_weight = None if field_of_points is None else np.full(b, np.nan)
     fused.curvature_cga(search.points, xb, qb, indptr, indices, radius, blend, plan.fit,
                         (k1, k2, d1, d2, samples, residual, nbrs, status), search.rank,
-                        *constraints, point_weights)
+                        *constraints, point_weights, row_weight)
     if plan.bias_correction:
         k1, k2, d1, d2 = _bias_corrected(search, xb, qb, indptr, indices, radius, blend, plan,
                                          (k1, k2, d1, d2), noise, constraints + (point_weights,),
-                                         samples, quadric)
+                                         samples, quadric, row_weight)
     out.k1[pos], out.k2[pos], out.d1[pos], out.d2[pos] = k1, k2, d1, d2
     out.normals[pos], out.n_samples[pos], out.residual[pos] = qb, samples, residual
     out.n_neighbors[pos], out.noise[pos], out.status[pos] = nbrs, noise, status
 
 
 def _bias_corrected(search, xb, qb, indptr, indices, radius, blend, plan, large, noise,
-                    constraints, large_samples, quadric=None):
+                    constraints, large_samples, quadric=None, row_weight=None):
     """``large`` (k1, k2, d1, d2) at ``radius`` extrapolated to radius 0 with a second fit over
     the same lists within ``BIAS_RATIO * radius`` (same normals, normal ``constraints`` and
     point weights (the last four arguments of :func:`meshcurv.fit.fused.curvature_cga`) and
@@ -666,7 +669,8 @@ def _bias_corrected(search, xb, qb, indptr, indices, radius, blend, plan, large,
     (:func:`clean_fraction` at :data:`BIAS_NOISE_SCALE`). Rows whose noise leaves less than
     :data:`BIAS_MIN_GAIN` of the correction keep ``large`` as it is, without the second fit.
     ``quadric``: the local quadric's normals about ``qb`` (see :func:`_tilt`) where already
-    fitted, else None."""
+    fitted, else None; ``row_weight``: the normal rows' weights the fit at ``radius`` used
+    (``curvature_cga``'s), which the smaller fit then uses too (None: its own)."""
     gain = clean_fraction(noise, BIAS_NOISE_SCALE * radius)
     rows = np.flatnonzero(gain >= BIAS_MIN_GAIN)
     if len(rows) == 0:
@@ -679,12 +683,13 @@ def _bias_corrected(search, xb, qb, indptr, indices, radius, blend, plan, large,
         constraints = tuple(c[rows] if i in (1, 2) and c is not None else c
                             for i, c in enumerate(constraints))
         quadric = None if quadric is None else quadric[rows]
+        row_weight = None if row_weight is None else row_weight[rows]
     b = len(xb)
     small = tuple(np.empty(b) for _ in range(2)) + tuple(np.empty((b, 3)) for _ in range(2))
     scratch = (np.empty(b), np.empty(b), np.empty(b), np.empty(b, dtype=np.int8))
     fused.curvature_cga(search.points, xb, qb, indptr, indices, radius * BIAS_RATIO, blend,
                         plan.fit[:6] + (True,) + plan.fit[7:], small + scratch, search.rank,
-                        *constraints)
+                        *constraints, row_weight)
     # only where the smaller ball saw every direction the larger one did: where a sparse or
     # clumpy sampling leaves half-sets of the smaller ball empty, its fit is no measurement of
     # the bias (clumpy torus: max |dk| 0.39 -> 1.7 with the correction applied there)

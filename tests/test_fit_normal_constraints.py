@@ -74,6 +74,38 @@ def test_kernel_with_normals_matches_numpy_reference(options):
     assert checked > 100
 
 
+def test_row_weights_are_reported_and_taken_as_given():
+    """``row_weight``: NaN entries are measured and written back (the specification's
+    row_weight), finite ones used instead of measuring: a second call at a smaller radius with
+    the first call's weights equals the specification given those weights."""
+    rng = np.random.default_rng(3)
+    s = surfaces.torus(n_major=100, n_minor=30)
+    v = s.vertices + rng.normal(scale=0.002, size=s.vertices.shape)
+    nv = s.normals + rng.normal(scale=0.02, size=s.normals.shape)
+    nv /= np.linalg.norm(nv, axis=1, keepdims=True)
+    m, radius = len(v), 0.45
+    fit = (8, 0.25, 3.0, 0.25, False, True, False, True)
+    noise, gain = np.full(m, 0.002), np.full(m, 0.8)
+    indptr, indices = sorted_ball_csr(v, radius)
+    weights = []
+    for r, given in ((radius, np.full(m, np.nan)), (radius / np.sqrt(2), None)):
+        w = given if given is not None else weights[0].copy()
+        out = tuple(np.empty(m) for _ in range(2)) + tuple(np.empty((m, 3)) for _ in range(2)) \
+            + (np.empty(m), np.empty(m), np.empty(m), np.empty(m, dtype=np.int8))
+        fused.curvature_cga(v, v, s.normals, indptr, indices, r, np.ones(m), fit, out, None, nv,
+                            noise, gain, None, w)
+        weights.append(w)
+        for i in range(0, m, 23):
+            nb = indices[indptr[i]:indptr[i + 1]]
+            ref = fused_spec.curvature_at_point(
+                v[i], s.normals[i], v[nb], r, neighbor_normals=nv[nb], noise=noise[i],
+                normal_gain=gain[i], row_weight=None if given is not None else weights[0][i])
+            assert out[0][i] == pytest.approx(ref["k1"], rel=1e-9, abs=1e-9, nan_ok=True)
+            assert w[i] == pytest.approx(ref["row_weight"], rel=1e-9)
+    assert np.all(np.isfinite(weights[0]) & (weights[0] > 0))
+    np.testing.assert_array_equal(weights[1], weights[0])    # used, not measured again
+
+
 def random_sphere(n, rng):
     p = rng.normal(size=(n, 3))
     return p / np.linalg.norm(p, axis=1, keepdims=True)

@@ -25,7 +25,8 @@ __all__ = ["curvature_cga", "estimate_one", "sampling_planes", "cache_is_warm"]
 
 @njit(cache=True)
 def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, work, tu, tv,
-                 point_normals=None, noise=np.nan, normal_gain=1.0, point_weights=None):
+                 point_normals=None, noise=np.nan, normal_gain=1.0, point_weights=None,
+                 row_weight=np.nan):
     """Circle fits in 2 ndir half-sets around one point x, then the Euler model fit.
 
     Parameters
@@ -45,13 +46,15 @@ def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, wo
         (:func:`meshcurv.fit.circle.circle_fit`), weighted by
         :func:`meshcurv.fit.circle.normal_row_weight`.
     point_weights : (n,) float64 in [0, 1] or None, see :func:`curvature_cga`
+    row_weight : float, the normal rows' weight mu to use instead of measuring it (NaN:
+        measure it, times ``normal_gain``)
 
     Returns
     -------
-    ``(k1, k2, theta1, n_samples, residual, n_neighbors, status)``: curvatures (1 / model
+    ``(k1, k2, theta1, n_samples, residual, n_neighbors, status, mu)``: curvatures (1 / model
     units; NaN where no estimate), the angle of d1 from tu, the circle fits used, the Euler
-    fit's RMS (1 / model units), the neighbors in the ball and the reason code
-    (:class:`meshcurv.result.Status`). An estimate needs 3 planes and 5 circle fits, a
+    fit's RMS (1 / model units), the neighbors in the ball, the reason code
+    (:class:`meshcurv.result.Status`) and the normal rows' weight used (0 without them). An estimate needs 3 planes and 5 circle fits, a
     well-posed Euler fit and measured directions spread by ``MIN_DIRECTION_SPREAD``.
     """
     ndir, slab, min_points, min_spread, unit_norm, corrected, half_frequency, robust = opts
@@ -65,22 +68,25 @@ def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, wo
                                  point_weights)
     mu = 0.0
     if point_normals is not None:
-        mu = normal_gain * normal_row_weight(acc, ndir, min_points, min_spread,
-                                             (noise * inv_r) * (noise * inv_r))
+        if np.isfinite(row_weight):
+            mu = row_weight
+        else:
+            mu = normal_gain * normal_row_weight(acc, ndir, min_points, min_spread,
+                                                 (noise * inv_r) * (noise * inv_r))
     m, planes_seen = half_set_samples(acc, ndir, min_points, min_spread, unit_norm, corrected,
                                       dirs, kappa, rows, mix, active, b3, ev, mu)
     if planes_seen < 3 or m < 5:
         why = STATUS_TOO_FEW_NEIGHBORS if n_nbr < min_points else STATUS_TOO_FEW_HALF_SETS
-        return np.nan, np.nan, np.nan, m, np.nan, n_nbr, why
+        return np.nan, np.nan, np.nan, m, np.nan, n_nbr, why, mu
     npar = 5 if half_frequency else 3
     if not robust_euler_fit(rows, kappa, active, m, npar, robust, mat, rhs, sol, scratch):
-        return np.nan, np.nan, np.nan, m, np.nan, n_nbr, STATUS_ILL_POSED_FIT
+        return np.nan, np.nan, np.nan, m, np.nan, n_nbr, STATUS_ILL_POSED_FIT, mu
     if direction_spread(mix, active, m) < MIN_DIRECTION_SPREAD:
-        return np.nan, np.nan, np.nan, m, np.nan, n_nbr, STATUS_DEGENERATE_DIRECTIONS
+        return np.nan, np.nan, np.nan, m, np.nan, n_nbr, STATUS_DEGENERATE_DIRECTIONS, mu
     used, sse = euler_residual(rows, kappa, active, m, npar, sol)
     amp = math.sqrt(sol[1] * sol[1] + sol[2] * sol[2])
     return ((sol[0] + amp) * inv_r, (sol[0] - amp) * inv_r, 0.5 * math.atan2(sol[2], sol[1]),
-            used, math.sqrt(sse / used) * inv_r, n_nbr, STATUS_OK)
+            used, math.sqrt(sse / used) * inv_r, n_nbr, STATUS_OK, mu)
 
 
 @njit(cache=True)
@@ -122,7 +128,7 @@ def _write_directions(q, theta1, tu, tv, n, d1, d2):
 @njit(parallel=True, cache=True)
 def curvature_cga(points, query_points, query_normals, indptr, indices, radius, blend, opts,
                   out, rank=None, point_normals=None, noise=None, normal_gain=None,
-                  point_weights=None):
+                  point_weights=None, row_weight=None):
     """Fused CGA circle-fit estimator over query points with CSR neighbor lists.
 
     Parameters
@@ -156,6 +162,10 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
     point_weights : (n,) float64 in [0, 1], optional, per row of ``points``: multiplies each
         neighbor's weight in the circle fits (the outlier pass's weights,
         :func:`meshcurv.fit.outliers.outlier_weight`); default 1.
+    row_weight : (m,) float64, optional, with ``point_normals``: per query point, the normal
+        rows' weight to use (finite entries), or NaN to measure it, and then the weight used is
+        written there. A second call over the same points with the first call's weights fits
+        the same combination of rows (the bias correction's two radii).
     """
     k1, k2, d1, d2, n_samples, residual, n_neighbors, status = out
     ndir = opts[0]
@@ -184,15 +194,18 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
                 for a in range(3):
                     n[a] /= nn
                 if point_normals is None:
-                    e1, e2, theta1, used, rms, n_nbr, why = estimate_one(
+                    e1, e2, theta1, used, rms, n_nbr, why, mu = estimate_one(
                         points, indices, indptr[q], indptr[q + 1], x, n, rank, radius,
                         blend[q], opts, planes, work, tu, tv, None, np.nan, 1.0,
                         point_weights)
                 else:
-                    e1, e2, theta1, used, rms, n_nbr, why = estimate_one(
+                    given_mu = np.nan if row_weight is None else row_weight[q]
+                    e1, e2, theta1, used, rms, n_nbr, why, mu = estimate_one(
                         points, indices, indptr[q], indptr[q + 1], x, n, rank, radius,
                         blend[q], opts, planes, work, tu, tv, point_normals, noise[q],
-                        normal_gain[q], point_weights)
+                        normal_gain[q], point_weights, given_mu)
+                    if row_weight is not None:
+                        row_weight[q] = mu
             if why == STATUS_OK and not np.isfinite(e1):
                 why = STATUS_ILL_POSED_FIT
             status[q] = why

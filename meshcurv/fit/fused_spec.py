@@ -20,7 +20,7 @@ def curvature_at_point(x, n, neighbors, radius, n_directions=8, slab=0.25, min_p
                        min_spread=0.25, blend=1.0, circle_normalization="tangent",
                        section_blend=True, half_frequency=False, robust=True,
                        neighbor_normals=None, noise=np.nan, normal_gain=1.0,
-                       point_weights=None):
+                       point_weights=None, row_weight=None):
     """Principal curvatures at one point from its neighbors (the kernel's contract, in numpy).
 
     Parameters
@@ -40,12 +40,14 @@ def curvature_at_point(x, n, neighbors, radius, n_directions=8, slab=0.25, min_p
         (:func:`~meshcurv.fit.circle_spec.normal_turn_rows`, relative to the ball's weighted
         mean position and normal) weighted by
         :func:`~meshcurv.fit.circle_spec.normal_row_weight` from ``noise`` (model units, the
-        local cubic fit's RMS height residual), times ``normal_gain``
+        local cubic fit's RMS height residual), times ``normal_gain``; or ``row_weight``
+        (float) when given
 
     Returns
     -------
     dict with k1, k2 (float, NaN if undefined, 1 / model units), d1 ((3,) unit), n_samples
-    (int, circle fits kept) and residual (float, RMS of the Euler fit, 1 / model units)
+    (int, circle fits kept), residual (float, RMS of the Euler fit, 1 / model units) and
+    row_weight (float, the normal rows' weight used; 0 without them)
     """
     x = np.asarray(x, dtype=np.float64)
     n = np.asarray(n, dtype=np.float64)
@@ -92,7 +94,7 @@ def curvature_at_point(x, n, neighbors, radius, n_directions=8, slab=0.25, min_p
     # x itself is in every half-set: position row (0, -1, 0), no normal row
     mu = 0.0
     if turn_uv is not None:
-        mu = normal_gain * normal_row_weight(
+        mu = row_weight if row_weight is not None else normal_gain * normal_row_weight(
             [(w[half],) + nrows for _, _, half, nrows in halves], (noise / radius) ** 2)
 
     kappas, rows, mixes, planes = [], [], [], set()
@@ -112,7 +114,7 @@ def curvature_at_point(x, n, neighbors, radius, n_directions=8, slab=0.25, min_p
         mixes.append(mix)
         planes.add(i)
     out = dict(k1=np.nan, k2=np.nan, d1=np.full(3, np.nan), n_samples=len(kappas),
-               residual=np.nan)
+               residual=np.nan, row_weight=mu)
     if len(planes) < 3 or len(kappas) < 5:
         return out
     k1, k2, theta1, rms, used = fit_euler(np.array(rows), np.array(kappas), robust=robust)

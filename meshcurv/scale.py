@@ -183,7 +183,8 @@ def select(results, radii, points, fallback=0, smooth=SMOOTH_NEIGHBORS, normal_v
 def assemble(results, radii, choice, base=0):
     """One CurvatureResult whose row i is row i of ``results[choice[i]]``, ``radius_used``
     included (``radii[choice[i]]``, or more where the sparse retry widened that row's ball;
-    NaN where not valid; ``radii[choice[i]]`` where the results have none); the other attributes (``radius``, ``orientation``) are those of
+    NaN where not valid; ``radii[choice[i]]`` where the results have none); the other
+    attributes (``radius``, ``orientation``) are those of
     ``results[base]``."""
     rows = np.arange(len(choice))
     first = results[base]

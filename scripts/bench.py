@@ -2,8 +2,8 @@
 
 Data: a torus and a sphere mesh at 100k and 1M vertices, the 100k torus with Gaussian noise of
 0.1 % of its diagonal along the normals (a scan's noise: the estimator's noise-dependent steps
-differ), and a 1M-point cloud (uniform random points on a torus, no faces). Radius: :func:`meshcurv.neighbors.default_radius`, the ball
-holding about 100 points. Methods:
+differ), and a 1M-point cloud (uniform random points on a torus, no faces). Radius:
+:func:`meshcurv.neighbors.default_radius`, the ball holding about 100 points. Methods:
 
 - ``meshcurv``: exact normals given; ``meshcurv (est.)``: normals estimated by PCA over the
   neighbourhood (k-ring on meshes, ball on the cloud), refined by the local fit and oriented

@@ -54,8 +54,9 @@ def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, wo
     ``(k1, k2, theta1, n_samples, residual, n_neighbors, status, mu)``: curvatures (1 / model
     units; NaN where no estimate), the angle of d1 from tu, the circle fits used, the Euler
     fit's RMS (1 / model units), the neighbors in the ball, the reason code
-    (:class:`meshcurv.result.Status`) and the normal rows' weight used (0 without them). An estimate needs 3 planes and 5 circle fits, a
-    well-posed Euler fit and measured directions spread by ``MIN_DIRECTION_SPREAD``.
+    (:class:`meshcurv.result.Status`) and the normal rows' weight used (0 without them). An
+    estimate needs 3 planes and 5 circle fits, a well-posed Euler fit and measured directions
+    spread by ``MIN_DIRECTION_SPREAD``.
     """
     ndir, slab, min_points, min_spread, unit_norm, corrected, half_frequency, robust = opts
     ca, sa, dirs = planes

@@ -327,13 +327,14 @@ def point_residuals(points, query_points, indptr, indices, radius, residual, sca
     where k is small, :func:`model_terms`: p coefficients; weights ``1 - r^2 / radius^2``),
     first by least squares, then up to ``iterations`` times reweighted by Tukey's biweight
     ``(1 - (e / (TUKEY_C s))^2)^2`` of each neighbor's residual e, with s ``MAD_SIGMA`` times
-    the median |e| of the last fit - none when no |e| of the start reaches ``TUKEY_C * s``
-    (no neighbor to reject: clean data, Gaussian noise). The scale of the final fit's residuals is their
-    biweight midvariance, times ``sqrt(k / (k - p))`` (the fitted coefficients), at least
-    ``OUTLIER_SCALE_FLOOR * radius``. The residual of x is its height above the final
-    fit at x; its scale is s times ``sqrt(1 + c)``, c the variance of the fitted height at x
-    per unit noise (``e^T A^-1 B A^-1 e``, A and B the normal matrices of the weights and of
-    their squares): x's own noise plus the fit's.
+    the median |e| of the last fit, stopping once no |e| of the last fit reaches
+    ``TUKEY_C * s`` (no neighbor to reject: clean data and Gaussian noise stop after the
+    start). The scale of the final fit's residuals is their biweight midvariance, times
+    ``sqrt(k / (k - p))`` (the fitted coefficients), at least ``OUTLIER_SCALE_FLOOR * radius``.
+    The residual of x is its height above the final fit at x; its scale is s times
+    ``sqrt(1 + c)``, c the variance of the fitted height at x per unit noise
+    (``e^T A^-1 B A^-1 e``, A and B the normal matrices of the weights and of their squares):
+    x's own noise plus the fit's.
 
     Parameters
     ----------

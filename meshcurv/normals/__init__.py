@@ -11,6 +11,5 @@ from .orient import orient_along, orient_like, orient_mst, orient_towards
 from .pca import pca_normals
 from .sphere import sphere_normals
 
-__all__ = ["face_vertex_normals", "face_normal_error", "pca_normals", "sphere_normals", "orient_like",
-           "orient_towards", "orient_along",
-           "orient_mst"]
+__all__ = ["face_vertex_normals", "face_normal_error", "pca_normals", "sphere_normals",
+           "orient_like", "orient_towards", "orient_along", "orient_mst"]

@@ -247,6 +247,14 @@ def _worker_main():
     _die_with_parent(int(sys.argv[1]))
 
     def stop(signum, frame):  # SIGTERM: unwind, so atomic writes remove their temporary file
+        # the parent reports the stop in one line: nothing this worker prints while it unwinds
+        # reaches the terminal (a signal landing in a C callback, e.g. while numba compiles,
+        # is printed by Python as "Exception ignored ..." and the worker continues until the
+        # parent kills it after the grace period)
+        quiet = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(quiet, 1)
+        os.dup2(quiet, 2)
+        os.close(quiet)
         raise SystemExit(128 + signum)
 
     signal.signal(signal.SIGTERM, stop)

@@ -180,11 +180,10 @@ def select(results, radii, points, fallback=0, smooth=SMOOTH_NEIGHBORS, normal_v
     return choice.astype(np.int64)
 
 
-def assemble(results, radii, choice, base=0):
+def assemble(results, choice, base=0):
     """One CurvatureResult whose row i is row i of ``results[choice[i]]``, ``radius_used``
-    included (``radii[choice[i]]``, or more where the sparse retry widened that row's ball;
-    NaN where not valid; ``radii[choice[i]]`` where the results have none); the other
-    attributes (``radius``, ``orientation``) are those of
+    included (the chosen radius, or more where the sparse retry widened that row's ball; NaN
+    where not valid); the other attributes (``radius``, ``orientation``) are those of
     ``results[base]``."""
     rows = np.arange(len(choice))
     first = results[base]
@@ -195,9 +194,6 @@ def assemble(results, radii, choice, base=0):
             continue
         stacked = np.stack([np.asarray(getattr(r, name)) for r in results])
         setattr(out, name, stacked[choice, rows].copy())
-    if first.radius_used is None:        # producers that do not tell: the ladder's radius
-        used = np.asarray(radii, dtype=np.float64)[choice]
-        out.radius_used = np.where(out.valid, used, np.nan)
     return out
 
 
@@ -228,4 +224,4 @@ def run_auto(v, f, given_normals, r0, query, plan, progress=False, radii=None,
     choice = select(results, radii, v[query], fallback=at_r0,
                     normal_var=_given_normal_variance(v, f, given_normals, r0, query, plan))
     # the default radius' own attributes: its radius and normal orientation note
-    return assemble(results, radii, choice, base=at_r0)
+    return assemble(results, choice, base=at_r0)

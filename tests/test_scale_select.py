@@ -104,7 +104,8 @@ def _result(k1, valid, n_neighbors, noise=0.0, radius=1.0):
         valid=np.asarray(valid), n_neighbors=np.full(q, n_neighbors, dtype=np.int32),
         n_samples=np.full(q, 16, dtype=np.int32), residual=np.zeros(q),
         noise=np.full(q, noise), radius=radius,
-        status=np.where(valid, Status.OK, Status.TOO_FEW_HALF_SETS).astype(np.int8))
+        status=np.where(valid, Status.OK, Status.TOO_FEW_HALF_SETS).astype(np.int8),
+        radius_used=np.where(valid, radius, np.nan))
 
 
 def test_invalid_rows_are_never_chosen_while_another_radius_has_an_estimate():
@@ -120,7 +121,7 @@ def test_invalid_rows_are_never_chosen_while_another_radius_has_an_estimate():
     has = valid.any(axis=0)
     assert np.all(valid[choice[has], np.flatnonzero(has)])
     assert np.all(choice[~has] == 1)
-    out = scale.assemble(results, radii, choice)
+    out = scale.assemble(results, choice)
     assert np.all(out.valid == has)
     assert np.all(out.status[~has] == Status.TOO_FEW_HALF_SETS)
     assert np.all(np.isnan(out.radius_used[~has]))

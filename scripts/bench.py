@@ -65,16 +65,22 @@ MESHLAB_METHODS = {f"MeshLab {k}": v for k, v in compare_meshlab.MESHLAB_METHODS
 # Data
 # ---------------------------------------------------------------------------------------------
 
+def _torus_surface(n_vertices, major=2.0, minor=0.5):
+    """:class:`meshcurv.surfaces.Surface` of a regular torus grid with about ``n_vertices``
+    vertices and square cells."""
+    from meshcurv import surfaces
+
+    n_minor = max(8, int(round(np.sqrt(n_vertices * minor / major))))
+    n_major = max(8, int(round(n_vertices / n_minor)))
+    return surfaces.torus(major, minor, n_major=n_major, n_minor=n_minor)
+
+
 def torus_mesh(n_vertices, major=2.0, minor=0.5):
     """Regular torus grid with about ``n_vertices`` vertices and square cells.
 
     Returns vertices (n, 3), faces (m, 3) int64 (outward winding), exact normals (n, 3).
     """
-    from meshcurv import surfaces
-
-    n_minor = max(8, int(round(np.sqrt(n_vertices * minor / major))))
-    n_major = max(8, int(round(n_vertices / n_minor)))
-    s = surfaces.torus(major, minor, n_major=n_major, n_minor=n_minor)
+    s = _torus_surface(n_vertices, major, minor)
     return s.vertices, s.faces, s.normals
 
 
@@ -142,10 +148,10 @@ def noisy_torus_mesh(n_vertices, noise=0.001, seed=0):
     """:func:`torus_mesh` with Gaussian noise along the normals of ``noise`` times the bounding
     box diagonal (the accuracy cases' 0.1 %: a scan's noise, where the estimator runs every
     robust round and no bias correction); the normals returned are the clean torus' exact ones."""
-    v, f, normals = torus_mesh(n_vertices)
-    diagonal = np.linalg.norm(v.max(axis=0) - v.min(axis=0))
-    shift = np.random.default_rng(seed).normal(0.0, noise * diagonal, len(v))
-    return v + shift[:, None] * normals, f, normals
+    from meshcurv import surfaces
+
+    s = surfaces.add_normal_noise(_torus_surface(n_vertices), noise, seed=seed)
+    return s.vertices, s.faces, s.normals
 
 
 def datasets(quick):

@@ -133,7 +133,7 @@ class Options:
         normals' from the mesh's own roughness, about noise / edge length), so smooth meshes
         get their face normals and noisy ones the plane fits; on clouds "pca". Plane fits
         tilt with the curvature across a truncated or uneven ball: open cylinder 32 x 16 at
-        the default radius, max |K| / k1^2 0.0086 with them, 3e-8 with the mix. Face normals
+        the default radius, max |K| / k1^2 0.0086 with them, 2e-8 with the mix. Face normals
         are the worst choice on noisy meshes (0.3 % noise, random sphere: mean |dk1| + |dk2|
         0.60 with face normals, 0.38 with PCA ones; max |dk1| 13 vs 0.9).
     refine_normals : bool, None or "auto", default None
@@ -205,8 +205,8 @@ class Options:
         vertices off by more than 10 % drop from 45 % to none; on clean surfaces every weight
         is 1 (results unchanged). Costs one more pass over the points, with a cubic fit and up
         to three reweighted ones each (none where no residual reaches 4.685 robust scales: clean
-        data, Gaussian noise): 0.95 s of a 3.7 s default run (torus of 250k vertices, normals
-        given, 2 threads; 1.0 s of 4.6 s with noise of 0.1 % of the diagonal).
+        data, Gaussian noise): 0.7 s of a 4.1 s default run (torus of 250k vertices, normals
+        given, 2 threads; 1.0 s of 3.5 s with noise of 0.1 % of the diagonal).
     sparse_retry : bool, default True
         Re-estimate the vertices whose ball holds too few points - their fit failed for lack
         of points (no 5 usable half-sets, an ill-posed or one-directional Euler fit, no plane

@@ -96,12 +96,14 @@ class Search(NamedTuple):
     """Neighborhoods of one radius: ``neighbors(idx)`` the CSR lists of the points ``v[idx]``
     (unsorted: the kernels do not depend on the order within a list), ``counts(idx)`` their
     lengths (nothing stored), ``points`` the coordinates the lists index (the grid's copy in
-    grid order, or ``v``) and ``rank`` their vertex indices (None when ``points`` is ``v``)."""
+    grid order, or ``v``) and ``rank`` their vertex indices (None when ``points`` is ``v``);
+    ``adjacency`` the mesh's edge graph of k-ring searches (None for balls)."""
 
     neighbors: Callable
     counts: Callable
     points: np.ndarray
     rank: object
+    adjacency: object = None
 
 
 def _mix_normals(start, refined, beta):
@@ -311,10 +313,11 @@ def ball_search(v, finite, radius):
                   tree.order if in_grid else None)
 
 
-def kring_search(v, f, radius):
+def kring_search(v, f, radius, adjacency=None):
     """:class:`Search` by connected k-rings over the mesh edges of faces ``f``, limited to the
-    ball of ``radius``."""
-    adjacency = edge_adjacency(f, len(v))
+    ball of ``radius``; ``adjacency``: their :func:`edge_adjacency`, if already made."""
+    if adjacency is None:
+        adjacency = edge_adjacency(f, len(v))
     work = KringWork(len(v))
 
     def neighbors(idx):
@@ -322,7 +325,7 @@ def kring_search(v, f, radius):
 
     def counts(idx):
         return kring_counts(v, adjacency, radius, idx, work)
-    return Search(neighbors, counts, v, None)
+    return Search(neighbors, counts, v, None, adjacency)
 
 
 def outlier_scores(v, radius, search, rows, progress, block=BLOCK):
@@ -463,19 +466,20 @@ def _start_normals(v, f, given, radius, search, finite, plan, progress, point_we
         return normals, None, note, None
     note = ("oriented like the faces" if face_normals is not None else
             "oriented towards +z" if plan.viewpoint is None else "oriented towards the viewpoint")
-    weight = (face_weights(v, f, face_normals) if plan.face_mix and face_normals is not None
-              else None)
+    weight = (face_weights(v, f, face_normals, search.adjacency)
+              if plan.face_mix and face_normals is not None else None)
     return (face_normals if plan.normals == "faces" else None), face_normals, note, weight
 
 
-def face_weights(v, f, face_normals):
+def face_weights(v, f, face_normals, adjacency=None):
     """Weights (n,) in [0, 1] of the face normals ``face_normals`` against plane fits, by
     inverse variance: ``t^2 / (t^2 + e^2)``, t = :data:`FACE_MIX_TILT` the plane fits' error,
     e the face normals' expected tilt (:func:`meshcurv.normals.face_normal_error`). About 1
     on smooth meshes however coarse (where plane fits tilt with the curvature across an
     uneven or truncated ball), towards 0 on noisy ones (noise of 0.1 % of the diagonal on a
-    torus 240 x 60: ~0.01); 0 where the face normals' error is not known."""
-    error = face_normal_error(v, f, face_normals)
+    torus 240 x 60: ~0.01); 0 where the face normals' error is not known. ``adjacency``: the
+    mesh's :func:`meshcurv.neighbors.edge_adjacency`, if already made."""
+    error = face_normal_error(v, f, face_normals, adjacency)
     t2 = FACE_MIX_TILT * FACE_MIX_TILT
     with np.errstate(invalid="ignore"):
         weight = t2 / (t2 + error * error)
@@ -760,7 +764,8 @@ def run_radii(v, f, given_normals, radii, query, plan, progress=False):
     what = "vertices" if f is not None else "points"
     if plan.use_kring:
         finite = None
-        searches = [kring_search(v, f, r) for r in radii]
+        searches = [kring_search(v, f, radii[0])]
+        searches += [kring_search(v, f, r, searches[0].adjacency) for r in radii[1:]]
         # work per query from a sample: smaller blocks for large balls, an error where infeasible
         block = min(block_size(s, query, r, what) for s, r in zip(searches, radii))
     else:
@@ -945,7 +950,8 @@ def retry_sparse(out, v, f, nv, face_normals, radius, query, plan, search, face_
     def search_at(factor):
         if factor not in wide:
             r = radius * factor
-            wide[factor] = kring_search(v, f, r) if plan.use_kring else ball_search(v, finite, r)
+            wide[factor] = (kring_search(v, f, r, search.adjacency) if plan.use_kring else
+                            ball_search(v, finite, r))
         return wide[factor]
     passes = [(factor, plan) for factor in SPARSE_FACTORS]
     if plan.fit[2] > SPARSE_MIN_POINTS:

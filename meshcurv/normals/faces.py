@@ -52,7 +52,7 @@ def face_vertex_normals(vertices, faces):
     return unit_rows(acc)
 
 
-def face_normal_error(vertices, faces, normals):
+def face_normal_error(vertices, faces, normals, adjacency=None):
     """Expected tilt (radians, (n,)) of the face normals ``normals`` of a mesh from its own
     roughness: ``sigma / h`` with h the mean length of a vertex's edges and sigma the noise
     of the positions along the normal, measured as the RMS difference of the umbrella heights
@@ -68,13 +68,15 @@ def face_normal_error(vertices, faces, normals):
     Parameters
     ----------
     vertices : (n, 3) float; faces : (m, 3) int, validated; normals : (n, 3) unit normals
+    adjacency : the faces' edge graph (:func:`meshcurv.neighbors.edge_adjacency`) if already
+        made, else None
 
     Returns
     -------
     (n,) float64, NaN at vertices in no face or with no finite normal
     """
     v = np.ascontiguousarray(vertices, dtype=np.float64)
-    indptr, indices = edge_adjacency(faces, len(v))
+    indptr, indices = edge_adjacency(faces, len(v)) if adjacency is None else adjacency
     spread, edge = np.empty(len(v)), np.empty(len(v))
     umbrella_spread(v, np.ascontiguousarray(normals, dtype=np.float64), indptr, indices,
                     spread, edge)

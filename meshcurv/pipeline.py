@@ -684,10 +684,12 @@ def _bias_corrected(search, xb, qb, indptr, indices, radius, blend, plan, large,
         indptr, indices = _csr_rows(indptr, indices, rows)
         xb, qb, blend, gain, large_samples = (a[rows] for a in (xb, qb, blend, gain,
                                                                   large_samples))
-        constraints = tuple(c[rows] if i in (1, 2) and c is not None else c
-                            for i, c in enumerate(constraints))
-        quadric = None if quadric is None else quadric[rows]
-        row_weight = None if row_weight is None else row_weight[rows]
+        # the per-query constraints (noise, normal gain) and normals; the per-point field
+        # and point weights stay whole
+        field, row_noise, row_gain, point_weights = constraints
+        row_noise, row_gain, quadric, row_weight = (
+            None if a is None else a[rows] for a in (row_noise, row_gain, quadric, row_weight))
+        constraints = (field, row_noise, row_gain, point_weights)
     b = len(xb)
     small = tuple(np.empty(b) for _ in range(2)) + tuple(np.empty((b, 3)) for _ in range(2))
     scratch = (np.empty(b), np.empty(b), np.empty(b), np.empty(b, dtype=np.int8))

@@ -17,13 +17,24 @@ def half_set(seed, curvature=0.8, noise=0.01, k=40):
     return u, v, h
 
 
+SLAB = 0.25
+
+
 def accumulate(u, v, h, beta):
-    """The kernel's accumulator of one plane (direction +u, slab holding every point)."""
+    """The kernel's accumulator of one plane (direction +u, slab of half-width SLAB holding
+    every point)."""
     acc = np.zeros((2, circle.N_ACC))
     ca, sa = np.array([1.0]), np.array([0.0])
     for a, b, c in zip(u, v, h):
-        circle.add_point(acc, a, b, c, a * a + b * b + c * c, beta, ca, sa, 10.0)
+        circle.add_point(acc, a, b, c, a * a + b * b + c * c, beta, ca, sa, SLAB)
     return acc
+
+
+def weights(u, v, h, beta):
+    """The fit's weights of x (1) and of the points: distance weight times the slab's taper."""
+    r2 = u * u + v * v + h * h
+    taper = (1 - beta) + beta * (1 - (v / SLAB) ** 2) ** 2
+    return np.concatenate([[1.0], ((1 - beta) + beta * (1 - r2) ** WEIGHT_POWER) * taper])
 
 
 @pytest.mark.parametrize("normalization", ["tangent", "unit"])
@@ -35,10 +46,9 @@ def test_circle_fit_matches_its_specification(normalization, beta):
         acc[0, 0] += 1.0                       # x itself, as the fused kernel adds it
         kappa = circle.circle_fit(acc, 0, normalization == "unit", np.empty((3, 3)), np.empty(3))
         q = np.column_stack([u, v, h])
-        r2 = np.einsum("ij,ij->i", q, q)
-        weights = np.concatenate([[1.0], (1 - beta) + beta * (1 - r2) ** WEIGHT_POWER])
         pts = np.vstack([np.zeros(3), q])
-        expected, _ = circle_spec.fit_normal_circle(pts, np.array([0.0, 0.0, 1.0]), weights,
+        expected, _ = circle_spec.fit_normal_circle(pts, np.array([0.0, 0.0, 1.0]),
+                                                     weights(u, v, h, beta),
                                                      normalization)
         assert kappa == pytest.approx(expected, rel=1e-9, abs=1e-9)
         assert 0.5 < kappa < 1.0     # bends away from n: positive (a paraboloid, not a circle)
@@ -51,8 +61,7 @@ def test_direction_mix_matches_its_specification():
     acc[0, 0] += 1.0
     mc, ms = circle.sample_design(acc, 0, True, 1.0, 0.0)
     r2 = u * u + v * v + h * h
-    weights = np.concatenate([[1.0], (1 - beta) + beta * (1 - r2) ** WEIGHT_POWER])
-    ec, es = circle_spec.sample_mix(r2, np.arctan2(v, u), weights, 0.0)
+    ec, es = circle_spec.sample_mix(r2, np.arctan2(v, u), weights(u, v, h, beta), 0.0)
     assert (mc, ms) == pytest.approx((ec, es), rel=1e-9, abs=1e-12)
     assert circle.sample_design(acc, 0, False, 0.3, 0.4) == (0.3, 0.4)
 

@@ -103,14 +103,18 @@ def assert_signs_right(res, normals, mean):
     """Every valid normal on the side of the exact one, and the mean curvature's sign right
     wherever it is clearly non-zero (a third of its 90th percentile: the estimate's own error
     at the default radius is a few percent of that) and the ball is not cut by a border (at
-    least 3/4 of the median neighbor count: one-sided balls have about half)."""
+    least 3/4 of the median neighbor count: one-sided balls have about half), but for at most
+    1 in 1000 of those points: where the ball spans half a wavelength of the terrain's finest
+    sine, its smoothing reaches the threshold (valley terrain, radius 0.7: mean error 0.010,
+    99th percentile 0.040, the worst 0.095 at a point of H 0.091). A wrongly oriented patch
+    flips hundreds."""
     ok = res.valid
     assert ok.mean() > 0.95
     assert (np.einsum("ij,ij->i", res.normals[ok], normals[ok]) > 0).all()
     full_ball = res.n_neighbors >= 0.75 * np.median(res.n_neighbors)
     clear = ok & full_ball & (np.abs(mean) > np.percentile(np.abs(mean), 90) / 3)
     assert clear.sum() > 0.3 * ok.sum()
-    assert (np.sign(res.mean[clear]) == np.sign(mean[clear])).all()
+    assert np.mean(np.sign(res.mean[clear]) != np.sign(mean[clear])) <= 1e-3
 
 
 @pytest.mark.parametrize("name", sorted(OPEN_VIEWS))

@@ -111,7 +111,8 @@ def accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta, 
 
     Each neighbor within the ball (``r2max`` the squared radius, ``inv_r`` its inverse; model
     units) is expressed in the frame (tu, tv, n) in units of the radius and added, with weight
-    ``(1 - beta) + beta (1 - r^2)^WEIGHT_POWER``, to the row of ``acc`` ((2 ndir, N_ACC),
+    ``(1 - beta) + beta (1 - r^2)^WEIGHT_POWER`` (times the slab's taper, see
+    :func:`add_point`), to the row of ``acc`` ((2 ndir, N_ACC),
     zeroed here) of every half-set whose slab (half-width ``slab``) holds it: half-set i on
     the positive side of plane i's direction ``planes[0][i], planes[1][i]`` (cos, sin), i + ndir
     on the negative side. Returns the number of neighbors in the ball.
@@ -195,22 +196,32 @@ def add_point(acc, u, v, h, r2, beta, ca, sa, slab, bu=0.0, bv=0.0, has_normal=F
     """Add one neighbor at frame coordinates (u, v, h), squared distance r2 (units of the
     radius), to the accumulator rows of the half-sets whose slabs hold it; with
     ``has_normal`` also its normal row, (bu, bv) the tangent components of n_p (before
-    :func:`center_normal_rows`); its weight is multiplied by ``point_weight``."""
+    :func:`center_normal_rows`); its weight is multiplied by ``point_weight``.
+
+    In each slab the weight is ``(1 - beta) + beta (1 - r^2)^WEIGHT_POWER`` times the slab's
+    taper ``(1 - beta) + beta (1 - (s / slab)^2)^2`` at the point's distance s from the
+    plane: where the data are clean a point entering or leaving a slab moves the fit
+    smoothly, as the distance weights do at the ball's edge. A hard slab edge made the
+    clean fits' error jump from vertex to vertex with the sampling (regular torus 240 x 60
+    at R 0.3, bias-corrected mean |dk| 0.0026 with it, 0.0007 with the taper; ellipsoid
+    0.0026 -> 0.0010); noisy data (beta 0) keep every slab point at full weight."""
     t2 = u * u + v * v
     if t2 <= 0.0:
         return
     ndir = ca.shape[0]
-    w = ((1.0 - beta) + beta * (1.0 - r2) ** WEIGHT_POWER) * point_weight
+    w0 = ((1.0 - beta) + beta * (1.0 - r2) ** WEIGHT_POWER) * point_weight
     c2 = (u * u - v * v) / t2
     s2 = 2.0 * u * v / t2
-    wr = w * r2
-    wrr = wr * r2
     for i in range(ndir):
         s = -sa[i] * u + ca[i] * v
         if abs(s) > slab:
             continue
         e = ca[i] * u + sa[i] * v
         k = i if e >= 0.0 else i + ndir
+        q = 1.0 - (s / slab) ** 2
+        w = w0 * ((1.0 - beta) + beta * q * q)
+        wr = w * r2
+        wrr = wr * r2
         acc[k, _N] += w
         acc[k, _H] += w * h
         acc[k, _HH] += w * h * h

@@ -31,7 +31,8 @@ def curvature_at_point(x, n, neighbors, radius, n_directions=8, slab=0.25, min_p
         the tangent frame, as the lowest-index one does in the kernel
     radius : float, model units; ``slab`` and ``min_spread`` are fractions of it
     blend : float in [0, 1], weights ``(1 - blend) + blend (1 - r^2 / radius^2)^WEIGHT_POWER``
-        (see :func:`meshcurv.pipeline.weight_blend`)
+        (see :func:`meshcurv.pipeline.weight_blend`), in each slab times its taper
+        ``(1 - blend) + blend (1 - (s / slab)^2)^2`` at the distance s from the plane
     point_weights : (k,) float in [0, 1], optional, per neighbor: multiplies its weight;
         neighbors of weight 0 join no half-set and set no frame (the outlier pass's weights)
     other parameters : as in :func:`meshcurv.principal_curvatures`
@@ -83,6 +84,9 @@ def curvature_at_point(x, n, neighbors, radius, n_directions=8, slab=0.25, min_p
         dist = -np.sin(alpha) * u + np.cos(alpha) * v    # distance to plane i (through x)
         along = np.cos(alpha) * u + np.sin(alpha) * v    # coordinate along the plane's tangent
         in_slab = np.abs(dist) <= slab
+        # the slab's weight tapers to 0 at its edges where the data are clean (like the
+        # distance weights), so points entering or leaving it move the fit smoothly
+        taper = (1 - blend) + blend * np.clip(1 - (dist / slab) ** 2, 0, None) ** 2
         for side, half in enumerate([in_slab & (along >= 0), in_slab & (along < 0)]):
             if half.sum() < min_points or np.abs(along[half]).max(initial=0) < min_spread:
                 continue
@@ -90,17 +94,17 @@ def curvature_at_point(x, n, neighbors, radius, n_directions=8, slab=0.25, min_p
             nrows = (np.zeros(half.sum()), np.zeros(half.sum()), np.full(half.sum(), np.nan))
             if turn_uv is not None:
                 nrows = normal_turn_rows(uv[half], turn_uv[half], theta)
-            halves.append((i, theta, half, nrows))
+            halves.append((i, theta, half, (w * taper)[half], nrows))
     # x itself is in every half-set: position row (0, -1, 0), no normal row
     mu = 0.0
     if turn_uv is not None:
         mu = row_weight if row_weight is not None else normal_gain * normal_row_weight(
-            [(w[half],) + nrows for _, _, half, nrows in halves], (noise / radius) ** 2)
+            [(wh,) + nrows for _, _, _, wh, nrows in halves], (noise / radius) ** 2)
 
     kappas, rows, mixes, planes = [], [], [], set()
-    for i, theta, half, nrows in halves:
+    for i, theta, half, wh, nrows in halves:
         pts = np.vstack([np.zeros(3), q[half]])
-        wt = np.concatenate([[1.0], w[half]])
+        wt = np.concatenate([[1.0], wh])
         kappa, _ = fit_normal_circle(pts, n, wt, circle_normalization,
                                      np.concatenate([[0.0], nrows[0]]),
                                      np.concatenate([[np.nan], nrows[2]]), mu)

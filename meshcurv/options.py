@@ -139,12 +139,13 @@ class Options:
         0.60 with face normals, 0.38 with PCA ones; max |dk1| 13 vs 0.9).
     refine_normals : bool, None or "auto", default None
         Refine the normals by a local fit over the same neighborhood (``normal_fit``) before
-        the circle fits, mixed with the starting normal by
-        the measured noise (the mix of ``weighting="auto"``,
-        :func:`meshcurv.pipeline.weight_blend`, whatever ``weighting`` is): face and PCA normals
-        tilt with irregular sampling (0.7 degrees on a random sphere, up to 3 % in
-        curvature), the quadric's normal does not but is noisier. None: refine estimated
-        normals, use given ones as they are. "auto": refine estimated normals; given ones are
+        the circle fits, mixed with the starting normal by the measured noise (the mix of
+        ``weighting="auto"``, :func:`meshcurv.pipeline.weight_blend`, whatever ``weighting``
+        is): face and PCA normals tilt with irregular sampling (0.7 degrees on a random
+        sphere, up to 3 % in curvature), the jet's normal does not but is noisier (its
+        quartic's gradient where the data are clean, its quadric's under noise:
+        :func:`meshcurv.fit.jet.local_jet`). None: refine estimated normals, use given ones as
+        they are. "auto": refine estimated normals; given ones are
         kept where the data agree with them and mixed with the fitted normal where a test
         over the whole input finds them noisier than the points
         (:func:`meshcurv.pipeline.given_normal_noise`; exact given normals stay bit for bit).
@@ -166,8 +167,9 @@ class Options:
         point: every normal towards it (a scanner position; exact for what a scanner there
         saw). ``result.orientation`` says which rule was used.
     normal_fit : {"auto", "sphere", "quadric"}, default "auto"
-        The fit that refines normals (``refine_normals``). "quadric": the local jet's quadric
-        height fit (:func:`meshcurv.fit.jet.local_jet`). "sphere": the Pratt-normalised
+        The fit that refines normals (``refine_normals``). "quadric": the local jet's height
+        fits (:func:`meshcurv.fit.jet.local_jet`: the quartic's gradient where the data are
+        clean, the quadric's under noise). "sphere": the Pratt-normalised
         algebraic sphere/plane fit of the paper's section 4
         (:func:`meshcurv.normals.sphere.sphere_normals`), exact on spheres and planes
         whatever the sampling, but tilted where the shape is far from a sphere. "auto": the

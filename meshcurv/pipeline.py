@@ -13,7 +13,7 @@ from scipy.spatial import cKDTree
 from tqdm.auto import tqdm
 
 from .fit import fused, jet, outliers
-from .fit.constants import TUKEY_C
+from .fit.constants import NOISE_SCALE, TUKEY_C
 from .fit.extrapolate import BIAS_RATIO, extrapolate_to_zero
 from .neighbors import (MAX_BALL_FRACTION, BallGrid, KringWork, ball_counts, ball_grid,
                         ball_neighbors, edge_adjacency, kring_counts, kring_neighbors,
@@ -37,13 +37,6 @@ BLOCK = 16384
 BLOCK_ENTRIES = 2 ** 24
 # Most neighbor pairs (query points x neighbors) a call takes on: hours of work beyond.
 MAX_PAIRS = 1e11
-
-# Noise level (RMS height residual of the local jet, as a fraction of the radius) at which
-# weighting="auto" mixes equal and distance weights half and half. Measured: clean samples of
-# the test surfaces stay below 0.01 % of the radius (below 0.09 % with the cubic jet this was
-# set with: Table 2 paraboloid 0.02 %, torus 0.08 %), normal noise of 0.03 % of the bounding-box diagonal already gives 0.6-0.9 %,
-# and from there on equal weights are the more accurate.
-NOISE_SCALE = 2e-3
 
 # The direction of ``orientation="+z"``.
 _UP = np.array([0.0, 0.0, 1.0])
@@ -109,7 +102,7 @@ class Search(NamedTuple):
 def _mix_normals(start, refined, beta):
     """``start + beta (refined - start)``, normalised, row by row.
 
-    With beta from the measured noise: the quadric's normal on clean data (no tilt from
+    With beta from the measured noise: the jet's normal on clean data (no tilt from
     irregular sampling), the starting one (usually the plane fit's, which averages the most
     points) under noise.
     """

@@ -1,5 +1,6 @@
 """Local jet: quartic (cubic where too few points) and quadric height fits around each point,
-for the noise level that steers the weights and the bias correction, and a refined normal. Compiled kernel; its numpy specification is
+for the noise level that steers the weights and the bias correction, and a refined normal.
+Compiled kernel; its numpy specification is
 :func:`meshcurv.fit.jet_spec.local_jet`.
 """
 
@@ -9,6 +10,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..linalg import CHUNK, ball_offset, solve_sym
+from .constants import NOISE_SCALE
 
 # Exponents (of u, of v) of the quartic height model's terms, in the order of its coefficients:
 # u^2, uv, v^2, u, v, 1 (the quadric), u^3, u^2 v, u v^2, v^3 (the cubic's), u^4 .. v^4.
@@ -43,11 +45,17 @@ def local_jet(points, query_points, normals, indptr, indices, radius, refine, no
     ``1 - r^2 / radius^2``, x included). The quartic fit's residual (15 coefficients; the
     cubic's, 10, where 11-15 points are all there is) is what the surface's shape up to fourth
     order cannot explain: on clean samples of smooth surfaces it is about 0.01 % of the radius
-    (the cubic's up to 0.13 %: a torus's fourth-order terms), with noise it is the noise. With ``refine`` the normal of the
-    fitted quadric (6 coefficients; the cubic's gradient at x has 3-5x its variance under
-    noise) at x, ``n - g_u tu - g_v tv`` normalised, replaces n: face and PCA normals tilt with
-    irregular sampling (0.7 degrees on a randomly sampled sphere at ~100 neighbors), the
-    quadric's normal does not. The refined normal stays on n's side.
+    (the cubic's up to 0.13 %: a torus's fourth-order terms), with noise it is the noise.
+
+    With ``refine`` the normal ``n - g_u tu - g_v tv`` (normalised) of a fitted gradient
+    (g_u, g_v) at x replaces n: face and PCA normals tilt with irregular sampling (0.7 degrees
+    on a randomly sampled sphere at ~100 neighbors). The gradient is the quartic's (cubic's)
+    where the data are clean and the quadric's (6 coefficients) under noise, mixed by
+    ``c = 1 / (1 + (noise / (NOISE_SCALE radius))^4)`` (the mix of ``weighting="auto"``):
+    the quadric's gradient has a third to a fifth of the quartic's variance under noise, but
+    where the sampling is uneven it takes up the surface's third-order terms (randomly
+    sampled ellipsoid at radius 0.3: the quadric's normals tilt by a median of 0.34 degrees,
+    the quartic's by ~0, mean |dk| 0.0103 -> 0.0033). The refined normal stays on n's side.
 
     Parameters
     ----------
@@ -148,14 +156,22 @@ def local_jet(points, query_points, normals, indptr, indices, radius, refine, no
             ss = swhh
             for a in range(npar):
                 ss -= sol[a] * rhs[a]
-            noise[q] = math.sqrt(max(ss, 0.0) / sw * count / (count - npar)) * radius
-            if not refine or not solve_sym(quad, rhs, _QUADRIC, sol):
+            rel = math.sqrt(max(ss, 0.0) / sw * count / (count - npar))
+            noise[q] = rel * radius
+            if not refine:
                 continue
-            if sol[3] * sol[3] + sol[4] * sol[4] > 1.0 / 3.0:
+            gu, gv = sol[3], sol[4]          # the quartic's (cubic's) gradient at x
+            clean = 1.0 / (1.0 + (rel / NOISE_SCALE) ** 4)
+            if clean < 1.0:
+                if not solve_sym(quad, rhs, _QUADRIC, sol):
+                    continue
+                gu = sol[3] + clean * (gu - sol[3])
+                gv = sol[4] + clean * (gv - sol[4])
+            if gu * gu + gv * gv > 1.0 / 3.0:
                 continue
-            g0 = n0 - sol[3] * t0 - sol[4] * b0
-            g1 = n1 - sol[3] * t1 - sol[4] * b1
-            g2 = n2 - sol[3] * t2 - sol[4] * b2
+            g0 = n0 - gu * t0 - gv * b0
+            g1 = n1 - gu * t1 - gv * b1
+            g2 = n2 - gu * t2 - gv * b2
             s = 1.0 / math.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
             if refined is None:
                 normals[q, 0] = g0 * s

@@ -3,6 +3,8 @@ quadric height fits around one point, for its noise level and refined normal."""
 
 import numpy as np
 
+from .constants import NOISE_SCALE
+
 __all__ = ["local_jet"]
 
 
@@ -20,9 +22,11 @@ def local_jet(x, n, neighbors, radius, point_weights=None):
 
     Returns
     -------
-    normal : (3,) float, unit normal of the fitted quadric at x, on n's side; n itself when a
-        fit is singular or the quadric would tilt it by more than 30 degrees (the kernel's
-        refined normal, in place or in its ``refined`` output)
+    normal : (3,) float, unit normal at x, on n's side, of the quartic's (cubic's) gradient
+        where the noise is low and the quadric's where it is high, mixed by
+        ``1 / (1 + (noise / (NOISE_SCALE radius))^4)``; n itself when a fit is singular or
+        the normal would tilt by more than 30 degrees (the kernel's refined normal, in place
+        or in its ``refined`` output)
     noise : float, RMS height residual of the quartic fit (15 coefficients), or of the cubic
         (10) where the quartic is singular or 15 points are all there is, model units,
         corrected for the coefficients; NaN when both are singular
@@ -53,8 +57,10 @@ def local_jet(x, n, neighbors, radius, point_weights=None):
     coef = np.linalg.solve(lhs[:npar, :npar], design[:, :npar].T @ (w * h))
     noise = np.sqrt(np.sum(w * (h - design[:, :npar] @ coef) ** 2) / w.sum() * len(q)
                     / (len(q) - npar))
-    coef = np.linalg.solve(lhs[:6, :6], design[:, :6].T @ (w * h))   # the quadric
-    if coef[3] ** 2 + coef[4] ** 2 > 1 / 3:
+    quadric = np.linalg.solve(lhs[:6, :6], design[:, :6].T @ (w * h))
+    clean = 1 / (1 + (noise / NOISE_SCALE) ** 4)
+    gu, gv = quadric[3:5] + clean * (coef[3:5] - quadric[3:5])
+    if gu ** 2 + gv ** 2 > 1 / 3:
         return n, noise * radius
-    g = n - coef[3] * tu - coef[4] * tv
+    g = n - gu * tu - gv * tv
     return g / np.linalg.norm(g), noise * radius

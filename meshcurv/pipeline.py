@@ -635,6 +635,10 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2
     d1, d2 = np.empty((b, 3)), np.empty((b, 3))
     status = np.empty(b, dtype=np.int8)
     blend = beta if plan.weighting == "auto" else weight_blend(noise, radius, plan.weighting)
+    # the slabs' taper trades points for a smooth edge: on where the bias correction is, for
+    # the same reason (a smaller systematic error against more noise)
+    taper = clean_fraction(noise, BIAS_NOISE_SCALE * radius) if plan.weighting == "auto" \
+        else blend
     # estimated normals' rows: by the measured noise, none where it could not be measured
     constraints = (None, None, None) if field_of_points is None else (
         field_of_points, noise,
@@ -645,18 +649,18 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2
     row_weight = None if field_of_points is None else np.full(b, np.nan)
     fused.curvature_cga(search.points, xb, qb, indptr, indices, radius, blend, plan.fit,
                         (k1, k2, d1, d2, samples, residual, nbrs, status), search.rank,
-                        *constraints, point_weights, row_weight)
+                        *constraints, point_weights, row_weight, taper)
     if plan.bias_correction:
         k1, k2, d1, d2 = _bias_corrected(search, xb, qb, indptr, indices, radius, blend, plan,
                                          (k1, k2, d1, d2), noise, constraints + (point_weights,),
-                                         samples, quadric, row_weight)
+                                         samples, quadric, row_weight, taper)
     out.k1[pos], out.k2[pos], out.d1[pos], out.d2[pos] = k1, k2, d1, d2
     out.normals[pos], out.n_samples[pos], out.residual[pos] = qb, samples, residual
     out.n_neighbors[pos], out.noise[pos], out.status[pos] = nbrs, noise, status
 
 
 def _bias_corrected(search, xb, qb, indptr, indices, radius, blend, plan, large, noise,
-                    constraints, large_samples, quadric=None, row_weight=None):
+                    constraints, large_samples, quadric=None, row_weight=None, taper=None):
     """``large`` (k1, k2, d1, d2) at ``radius`` extrapolated to radius 0 with a second fit over
     the same lists within ``BIAS_RATIO * radius`` (same normals, normal ``constraints`` and
     point weights (the last four arguments of :func:`meshcurv.fit.fused.curvature_cga`) and
@@ -667,7 +671,8 @@ def _bias_corrected(search, xb, qb, indptr, indices, radius, blend, plan, large,
     :data:`BIAS_MIN_GAIN` of the correction keep ``large`` as it is, without the second fit.
     ``quadric``: the local quadric's normals about ``qb`` (see :func:`_tilt`) where already
     fitted, else None; ``row_weight``: the normal rows' weights the fit at ``radius`` used
-    (``curvature_cga``'s), which the smaller fit then uses too (None: its own)."""
+    (``curvature_cga``'s), which the smaller fit then uses too (None: its own); ``taper``:
+    the slabs' taper blend of that fit (None: ``blend``)."""
     gain = clean_fraction(noise, BIAS_NOISE_SCALE * radius)
     rows = np.flatnonzero(gain >= BIAS_MIN_GAIN)
     if len(rows) == 0:
@@ -677,6 +682,7 @@ def _bias_corrected(search, xb, qb, indptr, indices, radius, blend, plan, large,
         indptr, indices = _csr_rows(indptr, indices, rows)
         xb, qb, blend, gain, large_samples = (a[rows] for a in (xb, qb, blend, gain,
                                                                   large_samples))
+        taper = None if taper is None else taper[rows]
         # the per-query constraints (noise, normal gain) and normals; the per-point field
         # and point weights stay whole
         field, row_noise, row_gain, point_weights = constraints
@@ -688,7 +694,7 @@ def _bias_corrected(search, xb, qb, indptr, indices, radius, blend, plan, large,
     scratch = (np.empty(b), np.empty(b), np.empty(b), np.empty(b, dtype=np.int8))
     fused.curvature_cga(search.points, xb, qb, indptr, indices, radius * BIAS_RATIO, blend,
                         plan.fit[:6] + (True,) + plan.fit[7:], small + scratch, search.rank,
-                        *constraints, row_weight)
+                        *constraints, row_weight, taper)
     # only where the smaller ball saw every direction the larger one did: where a sparse or
     # clumpy sampling leaves half-sets of the smaller ball empty, its fit is no measurement of
     # the bias (clumpy torus: max |dk| 0.39 -> 1.7 with the correction applied there)

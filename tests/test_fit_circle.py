@@ -20,35 +20,38 @@ def half_set(seed, curvature=0.8, noise=0.01, k=40):
 SLAB = 0.25
 
 
-def accumulate(u, v, h, beta):
+def accumulate(u, v, h, beta, taper=-1.0):
     """The kernel's accumulator of one plane (direction +u, slab of half-width SLAB holding
-    every point)."""
+    every point); ``taper`` the slab taper's blend (negative: ``beta``)."""
     acc = np.zeros((2, circle.N_ACC))
     ca, sa = np.array([1.0]), np.array([0.0])
     for a, b, c in zip(u, v, h):
-        circle.add_point(acc, a, b, c, a * a + b * b + c * c, beta, ca, sa, SLAB)
+        circle.add_point(acc, a, b, c, a * a + b * b + c * c, beta, ca, sa, SLAB, 0.0, 0.0,
+                         False, 1.0, taper)
     return acc
 
 
-def weights(u, v, h, beta):
+def weights(u, v, h, beta, taper=-1.0):
     """The fit's weights of x (1) and of the points: distance weight times the slab's taper."""
     r2 = u * u + v * v + h * h
-    taper = (1 - beta) + beta * (1 - (v / SLAB) ** 2) ** 2
-    return np.concatenate([[1.0], ((1 - beta) + beta * (1 - r2) ** WEIGHT_POWER) * taper])
+    tb = beta if taper < 0 else taper
+    slab = (1 - tb) + tb * (1 - (v / SLAB) ** 2) ** 2
+    return np.concatenate([[1.0], ((1 - beta) + beta * (1 - r2) ** WEIGHT_POWER) * slab])
 
 
 @pytest.mark.parametrize("normalization", ["tangent", "unit"])
-@pytest.mark.parametrize("beta", [0.0, 0.4, 1.0])
-def test_circle_fit_matches_its_specification(normalization, beta):
+@pytest.mark.parametrize("beta,taper", [(0.0, -1.0), (0.4, -1.0), (1.0, -1.0), (1.0, 0.0),
+                                        (0.4, 0.9)])
+def test_circle_fit_matches_its_specification(normalization, beta, taper):
     for seed in range(5):
         u, v, h = half_set(seed)
-        acc = accumulate(u, v, h, beta)
+        acc = accumulate(u, v, h, beta, taper)
         acc[0, 0] += 1.0                       # x itself, as the fused kernel adds it
         kappa = circle.circle_fit(acc, 0, normalization == "unit", np.empty((3, 3)), np.empty(3))
         q = np.column_stack([u, v, h])
         pts = np.vstack([np.zeros(3), q])
         expected, _ = circle_spec.fit_normal_circle(pts, np.array([0.0, 0.0, 1.0]),
-                                                     weights(u, v, h, beta),
+                                                     weights(u, v, h, beta, taper),
                                                      normalization)
         assert kappa == pytest.approx(expected, rel=1e-9, abs=1e-9)
         assert 0.5 < kappa < 1.0     # bends away from n: positive (a paraboloid, not a circle)

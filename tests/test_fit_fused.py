@@ -22,6 +22,8 @@ def sorted_ball_csr(points, radius):
     dict(blend=0.37, circle_normalization="unit"),
     dict(section_blend=False, robust=False),
     dict(half_frequency=True, n_directions=6, slab=0.4),
+    dict(blend=1.0, taper=0.0),
+    dict(blend=0.6, taper=0.95),
 ])
 def test_kernel_matches_numpy_reference(options):
     """The compiled kernel and the readable reference agree to round-off (1e-9) on a noisy torus."""
@@ -38,8 +40,9 @@ def test_kernel_matches_numpy_reference(options):
                section_blend=True, half_frequency=False, robust=True) | options
     fit = (opt["n_directions"], opt["slab"], 3.0, 0.25, opt["circle_normalization"] == "unit",
            opt["section_blend"], opt["half_frequency"], opt["robust"])
+    taper = None if "taper" not in opt else np.full(m, opt["taper"])
     fused.curvature_cga(v, v, s.normals, indptr, indices, radius, np.full(m, opt["blend"]), fit,
-                        tuple(out.values()))
+                        tuple(out.values()), taper=taper)
     checked = 0
     for i in range(0, m, 7):
         ref = fused_spec.curvature_at_point(v[i], s.normals[i],

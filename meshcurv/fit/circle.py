@@ -106,13 +106,13 @@ def circle_fit(acc, k, unit_norm, b, ev, mu=0.0):
 
 @njit(cache=True)
 def accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta, planes, slab,
-                         acc, point_normals=None, point_weights=None):
+                         acc, point_normals=None, point_weights=None, taper=-1.0):
     """Accumulate the neighbors ``points[nbr[lo:hi]]`` of x into the half-sets' sums; their count.
 
     Each neighbor within the ball (``r2max`` the squared radius, ``inv_r`` its inverse; model
     units) is expressed in the frame (tu, tv, n) in units of the radius and added, with weight
-    ``(1 - beta) + beta (1 - r^2)^WEIGHT_POWER`` (times the slab's taper, see
-    :func:`add_point`), to the row of ``acc`` ((2 ndir, N_ACC),
+    ``(1 - beta) + beta (1 - r^2)^WEIGHT_POWER`` (times the slab's taper of blend ``taper``,
+    ``beta`` where negative; see :func:`add_point`), to the row of ``acc`` ((2 ndir, N_ACC),
     zeroed here) of every half-set whose slab (half-width ``slab``) holds it: half-set i on
     the positive side of plane i's direction ``planes[0][i], planes[1][i]`` (cos, sin), i + ndir
     on the negative side. Returns the number of neighbors in the ball.
@@ -125,6 +125,8 @@ def accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta, 
     """
     ca, sa = planes[0], planes[1]
     ndir = ca.shape[0]
+    if taper < 0.0:
+        taper = beta
     for k in range(2 * ndir):
         for c in range(N_ACC):
             acc[k, c] = 0.0
@@ -161,7 +163,7 @@ def accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta, 
                 sv += w * v
                 sbu += w * bu
                 sbv += w * bv
-        add_point(acc, u, v, h, r2, beta, ca, sa, slab, bu, bv, has_normal, pw)
+        add_point(acc, u, v, h, r2, beta, ca, sa, slab, bu, bv, has_normal, pw, taper)
     if sw > 0.0:
         center_normal_rows(acc, ca, sa, su / sw, sv / sw, sbu / sw, sbv / sw)
     return n_nbr
@@ -192,23 +194,26 @@ def center_normal_rows(acc, ca, sa, cu, cv, du, dv):
 
 @njit(cache=True)
 def add_point(acc, u, v, h, r2, beta, ca, sa, slab, bu=0.0, bv=0.0, has_normal=False,
-              point_weight=1.0):
+              point_weight=1.0, taper=-1.0):
     """Add one neighbor at frame coordinates (u, v, h), squared distance r2 (units of the
     radius), to the accumulator rows of the half-sets whose slabs hold it; with
     ``has_normal`` also its normal row, (bu, bv) the tangent components of n_p (before
     :func:`center_normal_rows`); its weight is multiplied by ``point_weight``.
 
     In each slab the weight is ``(1 - beta) + beta (1 - r^2)^WEIGHT_POWER`` times the slab's
-    taper ``(1 - beta) + beta (1 - (s / slab)^2)^2`` at the point's distance s from the
-    plane: where the data are clean a point entering or leaving a slab moves the fit
-    smoothly, as the distance weights do at the ball's edge. A hard slab edge made the
-    clean fits' error jump from vertex to vertex with the sampling (regular torus 240 x 60
-    at R 0.3, bias-corrected mean |dk| 0.0026 with it, 0.0007 with the taper; ellipsoid
-    0.0026 -> 0.0010); noisy data (beta 0) keep every slab point at full weight."""
+    taper ``(1 - taper) + taper (1 - (s / slab)^2)^2`` at the point's distance s from the
+    plane (``taper`` < 0: ``beta``): where the data are clean a point entering or leaving a
+    slab moves the fit smoothly, as the distance weights do at the ball's edge. A hard slab
+    edge made the clean fits' error jump from vertex to vertex with the sampling (regular
+    torus 240 x 60 at R 0.3, bias-corrected mean |dk| 0.0026 with it, 0.0007 with the taper;
+    ellipsoid 0.0026 -> 0.0010); the taper halves a slab's points, so noisy data (taper 0)
+    keep every slab point at full weight."""
     t2 = u * u + v * v
     if t2 <= 0.0:
         return
     ndir = ca.shape[0]
+    if taper < 0.0:
+        taper = beta
     w0 = ((1.0 - beta) + beta * (1.0 - r2) ** WEIGHT_POWER) * point_weight
     c2 = (u * u - v * v) / t2
     s2 = 2.0 * u * v / t2
@@ -219,7 +224,7 @@ def add_point(acc, u, v, h, r2, beta, ca, sa, slab, bu=0.0, bv=0.0, has_normal=F
         e = ca[i] * u + sa[i] * v
         k = i if e >= 0.0 else i + ndir
         q = 1.0 - (s / slab) ** 2
-        w = w0 * ((1.0 - beta) + beta * q * q)
+        w = w0 * ((1.0 - taper) + taper * q * q)
         wr = w * r2
         wrr = wr * r2
         acc[k, _N] += w

@@ -26,7 +26,7 @@ __all__ = ["curvature_cga", "estimate_one", "sampling_planes", "cache_is_warm"]
 @njit(cache=True)
 def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, work, tu, tv,
                  point_normals=None, noise=np.nan, normal_gain=1.0, point_weights=None,
-                 row_weight=np.nan):
+                 row_weight=np.nan, taper=-1.0):
     """Circle fits in 2 ndir half-sets around one point x, then the Euler model fit.
 
     Parameters
@@ -48,6 +48,8 @@ def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, wo
     point_weights : (n,) float64 in [0, 1] or None, see :func:`curvature_cga`
     row_weight : float, the normal rows' weight mu to use instead of measuring it (NaN:
         measure it, times ``normal_gain``)
+    taper : float in [0, 1], the blend of the slabs' taper
+        (:func:`meshcurv.fit.circle.add_point`); negative: ``beta``
 
     Returns
     -------
@@ -66,7 +68,7 @@ def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, wo
     tangent_frame(points, nbr, lo, hi, x, n, r2max, tu, tv, rank, point_weights)
     n_nbr = accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta,
                                  (ca, sa), slab, acc, point_normals,
-                                 point_weights)
+                                 point_weights, taper)
     mu = 0.0
     if point_normals is not None:
         if np.isfinite(row_weight):
@@ -129,7 +131,7 @@ def _write_directions(q, theta1, tu, tv, n, d1, d2):
 @njit(parallel=True, cache=True)
 def curvature_cga(points, query_points, query_normals, indptr, indices, radius, blend, opts,
                   out, rank=None, point_normals=None, noise=None, normal_gain=None,
-                  point_weights=None, row_weight=None):
+                  point_weights=None, row_weight=None, taper=None):
     """Fused CGA circle-fit estimator over query points with CSR neighbor lists.
 
     Parameters
@@ -167,6 +169,8 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
         rows' weight to use (finite entries), or NaN to measure it, and then the weight used is
         written there. A second call over the same points with the first call's weights fits
         the same combination of rows (the bias correction's two radii).
+    taper : (m,) float64 in [0, 1], optional, per query point: the blend of the slabs' taper
+        (:func:`meshcurv.fit.circle.add_point`); default ``blend``.
     """
     k1, k2, d1, d2, n_samples, residual, n_neighbors, status = out
     ndir = opts[0]
@@ -198,13 +202,14 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
                     e1, e2, theta1, used, rms, n_nbr, why, mu = estimate_one(
                         points, indices, indptr[q], indptr[q + 1], x, n, rank, radius,
                         blend[q], opts, planes, work, tu, tv, None, np.nan, 1.0,
-                        point_weights)
+                        point_weights, np.nan, -1.0 if taper is None else taper[q])
                 else:
                     given_mu = np.nan if row_weight is None else row_weight[q]
                     e1, e2, theta1, used, rms, n_nbr, why, mu = estimate_one(
                         points, indices, indptr[q], indptr[q + 1], x, n, rank, radius,
                         blend[q], opts, planes, work, tu, tv, point_normals, noise[q],
-                        normal_gain[q], point_weights, given_mu)
+                        normal_gain[q], point_weights, given_mu,
+                        -1.0 if taper is None else taper[q])
                     if row_weight is not None:
                         row_weight[q] = mu
             if why == STATUS_OK and not np.isfinite(e1):

@@ -20,7 +20,7 @@ def curvature_at_point(x, n, neighbors, radius, n_directions=8, slab=0.25, min_p
                        min_spread=0.25, blend=1.0, circle_normalization="tangent",
                        section_blend=True, half_frequency=False, robust=True,
                        neighbor_normals=None, noise=np.nan, normal_gain=1.0,
-                       point_weights=None, row_weight=None):
+                       point_weights=None, row_weight=None, taper=None):
     """Principal curvatures at one point from its neighbors (the kernel's contract, in numpy).
 
     Parameters
@@ -32,7 +32,8 @@ def curvature_at_point(x, n, neighbors, radius, n_directions=8, slab=0.25, min_p
     radius : float, model units; ``slab`` and ``min_spread`` are fractions of it
     blend : float in [0, 1], weights ``(1 - blend) + blend (1 - r^2 / radius^2)^WEIGHT_POWER``
         (see :func:`meshcurv.pipeline.weight_blend`), in each slab times its taper
-        ``(1 - blend) + blend (1 - (s / slab)^2)^2`` at the distance s from the plane
+        ``(1 - taper) + taper (1 - (s / slab)^2)^2`` at the distance s from the plane
+    taper : float in [0, 1] or None (``blend``), the blend of the slabs' taper
     point_weights : (k,) float in [0, 1], optional, per neighbor: multiplies its weight;
         neighbors of weight 0 join no half-set and set no frame (the outlier pass's weights)
     other parameters : as in :func:`meshcurv.principal_curvatures`
@@ -86,7 +87,8 @@ def curvature_at_point(x, n, neighbors, radius, n_directions=8, slab=0.25, min_p
         in_slab = np.abs(dist) <= slab
         # the slab's weight tapers to 0 at its edges where the data are clean (like the
         # distance weights), so points entering or leaving it move the fit smoothly
-        taper = (1 - blend) + blend * np.clip(1 - (dist / slab) ** 2, 0, None) ** 2
+        tb = blend if taper is None else taper
+        in_taper = (1 - tb) + tb * np.clip(1 - (dist / slab) ** 2, 0, None) ** 2
         for side, half in enumerate([in_slab & (along >= 0), in_slab & (along < 0)]):
             if half.sum() < min_points or np.abs(along[half]).max(initial=0) < min_spread:
                 continue
@@ -94,7 +96,7 @@ def curvature_at_point(x, n, neighbors, radius, n_directions=8, slab=0.25, min_p
             nrows = (np.zeros(half.sum()), np.zeros(half.sum()), np.full(half.sum(), np.nan))
             if turn_uv is not None:
                 nrows = normal_turn_rows(uv[half], turn_uv[half], theta)
-            halves.append((i, theta, half, (w * taper)[half], nrows))
+            halves.append((i, theta, half, (w * in_taper)[half], nrows))
     # x itself is in every half-set: position row (0, -1, 0), no normal row
     mu = 0.0
     if turn_uv is not None:

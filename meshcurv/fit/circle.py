@@ -204,10 +204,10 @@ def add_point(acc, u, v, h, r2, beta, ca, sa, slab, bu=0.0, bv=0.0, has_normal=F
     taper ``(1 - taper) + taper (1 - (s / slab)^2)^2`` at the point's distance s from the
     plane (``taper`` < 0: ``beta``): where the data are clean a point entering or leaving a
     slab moves the fit smoothly, as the distance weights do at the ball's edge. A hard slab
-    edge made the clean fits' error jump from vertex to vertex with the sampling (regular
-    torus 240 x 60 at R 0.3, bias-corrected mean |dk| 0.0026 with it, 0.0007 with the taper;
-    ellipsoid 0.0026 -> 0.0010); the taper halves a slab's points, so noisy data (taper 0)
-    keep every slab point at full weight."""
+    edge made the clean fits' error jump from vertex to vertex with the sampling (measured
+    when the taper came in: regular torus 240 x 60 at R 0.3, bias-corrected mean |dk| 0.0026
+    -> 0.0007; ellipsoid 0.0026 -> 0.0010); the taper halves a slab's points, so noisy data
+    (taper 0) keep every slab point at full weight."""
     t2 = u * u + v * v
     if t2 <= 0.0:
         return

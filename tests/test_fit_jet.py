@@ -16,6 +16,19 @@ def sorted_ball_csr(points, radius):
     return indptr, np.concatenate(lists).astype(np.int64)
 
 
+def refined_as_specified(v, start, radius, every):
+    """The kernel's refined normals and noise from ``start`` over balls of ``radius``, checked
+    against the numpy specification at every ``every``-th point."""
+    indptr, indices = sorted_ball_csr(v, radius)
+    refined, noise = start.copy(), np.empty(len(v))
+    jet.local_jet(v, v, refined, indptr, indices, radius, True, noise)
+    for i in range(0, len(v), every):
+        normal, nz = jet_spec.local_jet(v[i], start[i], v[indices[indptr[i]:indptr[i + 1]]], radius)
+        np.testing.assert_allclose(refined[i], normal, atol=1e-9)
+        assert noise[i] == pytest.approx(nz, rel=1e-9)
+    return refined, noise
+
+
 def test_local_jet_matches_numpy_reference():
     """Cubic fit: normals and noise as the reference; 3-degree normal errors come down to the
     noise level, and the noise estimate finds the noise that was added."""
@@ -23,17 +36,9 @@ def test_local_jet_matches_numpy_reference():
     s = surfaces.torus(n_major=100, n_minor=30)
     sigma = 0.005
     v = s.vertices + rng.normal(scale=sigma, size=(len(s.vertices), 1)) * s.normals
-    radius = 0.3
-    indptr, indices = sorted_ball_csr(v, radius)
     start = s.normals + rng.normal(scale=0.05, size=v.shape)
     start /= np.linalg.norm(start, axis=1, keepdims=True)
-    refined = start.copy()
-    noise = np.empty(len(v))
-    jet.local_jet(v, v, refined, indptr, indices, radius, True, noise)
-    for i in range(0, len(v), 13):
-        normal, nz = jet_spec.local_jet(v[i], start[i], v[indices[indptr[i]:indptr[i + 1]]], radius)
-        np.testing.assert_allclose(refined[i], normal, atol=1e-9)
-        assert noise[i] == pytest.approx(nz, rel=1e-9)
+    refined, noise = refined_as_specified(v, start, 0.3, 13)
     err = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", refined, s.normals), -1, 1)))
     assert err.mean() < 1.0
     # the RMS of the added N(0, sigma) heights, up to the fit's and the weights' small effects
@@ -50,16 +55,9 @@ def test_refined_normal_takes_the_quartic_gradient_where_the_data_are_clean(sigm
     rng = np.random.default_rng(5)
     s = surfaces.ellipsoid(sampling="random", n=6000, seed=5)
     v = s.vertices + rng.normal(scale=sigma, size=(len(s.vertices), 1)) * s.normals
-    radius = 0.3
-    indptr, indices = sorted_ball_csr(v, radius)
     start = s.normals + rng.normal(scale=0.02, size=v.shape)
     start /= np.linalg.norm(start, axis=1, keepdims=True)
-    refined, noise = start.copy(), np.empty(len(v))
-    jet.local_jet(v, v, refined, indptr, indices, radius, True, noise)
-    for i in range(0, len(v), 17):
-        normal, nz = jet_spec.local_jet(v[i], start[i], v[indices[indptr[i]:indptr[i + 1]]], radius)
-        np.testing.assert_allclose(refined[i], normal, atol=1e-9)
-        assert noise[i] == pytest.approx(nz, rel=1e-9)
+    refined, _ = refined_as_specified(v, start, 0.3, 17)
     tilt = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", refined, s.normals), -1, 1)))
     if sigma == 0.0:
         assert np.median(tilt) < 0.03      # measured 0.008

@@ -55,7 +55,7 @@ def local_jet(points, query_points, normals, indptr, indices, radius, refine, no
     the quadric's gradient has a third to a fifth of the quartic's variance under noise, but
     where the sampling is uneven it takes up the surface's third-order terms (randomly
     sampled ellipsoid at radius 0.3: the quadric's normals tilt by a median of 0.34 degrees,
-    the quartic's by ~0, mean |dk| 0.0103 -> 0.0033). The refined normal stays on n's side.
+    the quartic's by 0.01, mean |dk| 0.0103 -> 0.0033). The refined normal stays on n's side.
 
     Parameters
     ----------

@@ -635,10 +635,11 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2
     d1, d2 = np.empty((b, 3)), np.empty((b, 3))
     status = np.empty(b, dtype=np.int8)
     blend = beta if plan.weighting == "auto" else weight_blend(noise, radius, plan.weighting)
-    # the slabs' taper trades points for a smooth edge: on where the bias correction is, for
-    # the same reason (a smaller systematic error against more noise)
-    taper = clean_fraction(noise, BIAS_NOISE_SCALE * radius) if plan.weighting == "auto" \
-        else blend
+    # the share of the bias correction the measured noise leaves; the slabs' taper trades
+    # points for a smooth edge and is on where the correction is, for the same reason (a
+    # smaller systematic error against more noise)
+    bias_gain = clean_fraction(noise, BIAS_NOISE_SCALE * radius)
+    taper = bias_gain if plan.weighting == "auto" else blend
     # estimated normals' rows: by the measured noise, none where it could not be measured
     constraints = (None, None, None) if field_of_points is None else (
         field_of_points, noise,
@@ -652,28 +653,28 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2
                         *constraints, point_weights, row_weight, taper)
     if plan.bias_correction:
         k1, k2, d1, d2 = _bias_corrected(search, xb, qb, indptr, indices, radius, blend, plan,
-                                         (k1, k2, d1, d2), noise, constraints + (point_weights,),
+                                         (k1, k2, d1, d2), bias_gain,
+                                         constraints + (point_weights,),
                                          samples, quadric, row_weight, taper)
     out.k1[pos], out.k2[pos], out.d1[pos], out.d2[pos] = k1, k2, d1, d2
     out.normals[pos], out.n_samples[pos], out.residual[pos] = qb, samples, residual
     out.n_neighbors[pos], out.noise[pos], out.status[pos] = nbrs, noise, status
 
 
-def _bias_corrected(search, xb, qb, indptr, indices, radius, blend, plan, large, noise,
+def _bias_corrected(search, xb, qb, indptr, indices, radius, blend, plan, large, gain,
                     constraints, large_samples, quadric=None, row_weight=None, taper=None):
     """``large`` (k1, k2, d1, d2) at ``radius`` extrapolated to radius 0 with a second fit over
     the same lists within ``BIAS_RATIO * radius`` (same normals, normal ``constraints`` and
     point weights (the last four arguments of :func:`meshcurv.fit.fused.curvature_cga`) and
     weight profile; the
     half-frequency Euler model, which absorbs what a tilted normal does to opposite half-sets
-    of a smaller, more unevenly filled ball), mixed in by the measured ``noise``
-    (:func:`clean_fraction` at :data:`BIAS_NOISE_SCALE`). Rows whose noise leaves less than
-    :data:`BIAS_MIN_GAIN` of the correction keep ``large`` as it is, without the second fit.
+    of a smaller, more unevenly filled ball), mixed in by ``gain`` (m,), the share the
+    measured noise leaves (:func:`clean_fraction` at :data:`BIAS_NOISE_SCALE`). Rows whose
+    gain is below :data:`BIAS_MIN_GAIN` keep ``large`` as it is, without the second fit.
     ``quadric``: the local quadric's normals about ``qb`` (see :func:`_tilt`) where already
     fitted, else None; ``row_weight``: the normal rows' weights the fit at ``radius`` used
     (``curvature_cga``'s), which the smaller fit then uses too (None: its own); ``taper``:
     the slabs' taper blend of that fit (None: ``blend``)."""
-    gain = clean_fraction(noise, BIAS_NOISE_SCALE * radius)
     rows = np.flatnonzero(gain >= BIAS_MIN_GAIN)
     if len(rows) == 0:
         return large

@@ -125,8 +125,6 @@ def accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta, 
     """
     ca, sa = planes[0], planes[1]
     ndir = ca.shape[0]
-    if taper < 0.0:
-        taper = beta
     for k in range(2 * ndir):
         for c in range(N_ACC):
             acc[k, c] = 0.0

@@ -187,7 +187,9 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
         error, noise variance (measured from the local fit's residuals) plus bias (measured
         from the change across radii), with at least 20 neighbors and the ball a small cap
         of the curvature. ``result.radius_used`` gives each row's radius, ``result.radius``
-        the default radius the ladder is built on. 10-17 times the cost of one radius.
+        the default radius the ladder is built on. Rows where the data are clean enough for
+        the bias correction keep the default radius; where every row is such, the result is
+        the default's at its cost, else the ladder costs 10-17 times one radius.
     n_directions : int, default 8
         Planes through the normal, i.e. ``2 * n_directions`` circle fits per vertex.
     neighborhood : {"auto", "kring", "ball"}

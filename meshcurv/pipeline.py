@@ -52,6 +52,15 @@ BIAS_NOISE_SCALE = 2.5e-4
 # above ~5.6 BIAS_NOISE_SCALE) the correction would move the estimate by less than 1/500 of
 # the two fits' difference, itself mostly the smaller fit's noise there.
 BIAS_MIN_GAIN = 1e-3
+# Telling the shape's higher orders from noise in the quartic's residual (:func:`bias_noise`):
+# the residual of the shape falls like radius^SHAPE_RESIDUAL_ORDER (the quartic's first
+# omitted terms), to 2^-2.5 = 0.18 of itself in a ball sqrt 2 smaller, while noise stays; a
+# row whose residual falls below SHAPE_RESIDUAL_DROP of itself there is taken for the shape's
+# (an estimate of the noise from the ~50 points of the smaller ball scatters by ~20 %, so
+# noise alone does not halve it). Coarse meshes at their default radius: torus 120 x 30,
+# residual 7.9e-4 of the radius at R 0.45 that read as noise and kept the correction off.
+SHAPE_RESIDUAL_ORDER = 5
+SHAPE_RESIDUAL_DROP = 0.5
 # Tilt (radians) of given normals from the local quadric's at which the bias correction is
 # applied half: exact normals of clean samples tilt from the quadric's by its own error (a few
 # 1e-3 where the curvature varies inside the ball: Table 2 paraboloid at radius 2), normals
@@ -638,7 +647,8 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2
     # the share of the bias correction the measured noise leaves; the slabs' taper trades
     # points for a smooth edge and is on where the correction is, for the same reason (a
     # smaller systematic error against more noise)
-    bias_gain = clean_fraction(noise, BIAS_NOISE_SCALE * radius)
+    bias_gain = clean_fraction(bias_noise(search, xb, qb, indptr, indices, radius, noise,
+                                          point_weights), BIAS_NOISE_SCALE * radius)
     taper = bias_gain if plan.weighting == "auto" else blend
     # estimated normals' rows: by the measured noise, none where it could not be measured
     constraints = (None, None, None) if field_of_points is None else (
@@ -659,6 +669,32 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2
     out.k1[pos], out.k2[pos], out.d1[pos], out.d2[pos] = k1, k2, d1, d2
     out.normals[pos], out.n_samples[pos], out.residual[pos] = qb, samples, residual
     out.n_neighbors[pos], out.noise[pos], out.status[pos] = nbrs, noise, status
+
+
+def bias_noise(search, xb, qb, indptr, indices, radius, noise, point_weights=None):
+    """The noise (b,) that sets the bias correction's share and the slabs' taper: ``noise``
+    (the local jet's residual at ``radius``, model units) less the shape's higher orders where
+    they are what it measures. Rows whose correction ``noise`` leaves less than half on fit
+    the jet again within ``radius / sqrt 2`` (normals ``qb``, the same lists and
+    ``point_weights``); where its residual s falls below ``SHAPE_RESIDUAL_DROP`` of ``noise``
+    the noise is what is left of s once the shape's share (``noise``, scaled by
+    ``2^-SHAPE_RESIDUAL_ORDER`` in variance) is taken out of it; elsewhere ``noise``. The
+    result's ``noise`` field stays the jet's residual."""
+    gain = clean_fraction(noise, BIAS_NOISE_SCALE * radius)
+    rows = np.flatnonzero((gain < 0.5) & np.isfinite(noise))
+    if len(rows) == 0:
+        return noise
+    sub_ptr, sub_idx = _csr_rows(indptr, indices, rows)
+    small = np.empty(len(rows))
+    jet.local_jet(search.points, xb[rows], qb[rows], sub_ptr, sub_idx, radius / np.sqrt(2.0),
+                  False, small, point_weights)
+    shape = 2.0 ** -SHAPE_RESIDUAL_ORDER
+    with np.errstate(invalid="ignore"):
+        left = np.sqrt(np.maximum(0.0, (small ** 2 - shape * noise[rows] ** 2) / (1.0 - shape)))
+        drops = np.isfinite(left) & (small < SHAPE_RESIDUAL_DROP * noise[rows])
+    out = noise.copy()
+    out[rows] = np.where(drops, left, noise[rows])
+    return out
 
 
 def _bias_corrected(search, xb, qb, indptr, indices, radius, blend, plan, large, gain,

@@ -10,6 +10,7 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 from scipy.spatial import cKDTree
+from scipy.stats import chi2
 from tqdm.auto import tqdm
 
 from .fit import fused, jet, outliers
@@ -55,12 +56,15 @@ BIAS_MIN_GAIN = 1e-3
 # Telling the shape's higher orders from noise in the quartic's residual (:func:`bias_noise`):
 # the residual of the shape falls like radius^SHAPE_RESIDUAL_ORDER (the quartic's first
 # omitted terms), to 2^-2.5 = 0.18 of itself in a ball sqrt 2 smaller, while noise stays; a
-# row whose residual falls below SHAPE_RESIDUAL_DROP of itself there is taken for the shape's
-# (an estimate of the noise from the ~50 points of the smaller ball scatters by ~20 %, so
-# noise alone does not halve it). Coarse meshes at their default radius: torus 120 x 30,
-# residual 7.9e-4 of the radius at R 0.45 that read as noise and kept the correction off.
+# row whose residual falls below SHAPE_RESIDUAL_DROP of itself there is taken for the shape's,
+# and below less where the smaller ball has so few points that noise alone would fall that
+# far with a chance above SHAPE_FALSE_DROP (the residual's square has a chi-square spread
+# with the fit's degrees of freedom: ~50 points, 35 of them, halve it with a chance of
+# ~2e-6). Coarse meshes at their default radius: torus 120 x 30, residual 7.9e-4 of the
+# radius at R 0.45 that read as noise and kept the correction off.
 SHAPE_RESIDUAL_ORDER = 5
 SHAPE_RESIDUAL_DROP = 0.5
+SHAPE_FALSE_DROP = 1e-3
 # Tilt (radians) of given normals from the local quadric's at which the bias correction is
 # applied half: exact normals of clean samples tilt from the quadric's by its own error (a few
 # 1e-3 where the curvature varies inside the ball: Table 2 paraboloid at radius 2), normals
@@ -677,7 +681,7 @@ def bias_noise(search, xb, qb, indptr, indices, radius, noise, point_weights=Non
     they are what it measures. Rows whose correction ``noise`` leaves less than half on fit
     the jet again within ``radius / sqrt 2`` (normals ``qb``, the same lists and
     ``point_weights``); where its residual s falls below ``SHAPE_RESIDUAL_DROP`` of ``noise``
-    the noise is what is left of s once the shape's share (``noise``, scaled by
+    (less where noise alone could: ``SHAPE_FALSE_DROP``) the noise is what is left of s once the shape's share (``noise``, scaled by
     ``2^-SHAPE_RESIDUAL_ORDER`` in variance) is taken out of it; elsewhere ``noise``. The
     result's ``noise`` field stays the jet's residual."""
     gain = clean_fraction(noise, BIAS_NOISE_SCALE * radius)
@@ -688,10 +692,20 @@ def bias_noise(search, xb, qb, indptr, indices, radius, noise, point_weights=Non
     small = np.empty(len(rows))
     jet.local_jet(search.points, xb[rows], qb[rows], sub_ptr, sub_idx, radius / np.sqrt(2.0),
                   False, small, point_weights)
+    # the smaller fit's degrees of freedom: its points (x included) less the quartic's 15
+    owner = np.repeat(np.arange(len(rows)), np.diff(sub_ptr))
+    offset = search.points[sub_idx] - xb[rows][owner]
+    d2 = np.einsum("ij,ij->i", offset, offset)
+    inside = np.bincount(owner[(d2 > 0.0) & (d2 <= 0.5 * radius * radius)],
+                         minlength=len(rows))
+    dof = inside + 1 - 15
+    with np.errstate(invalid="ignore", divide="ignore"):
+        chance = np.sqrt(chi2.ppf(SHAPE_FALSE_DROP, np.maximum(dof, 1)) / np.maximum(dof, 1))
+    threshold = np.where(dof > 0, np.minimum(SHAPE_RESIDUAL_DROP, chance), 0.0)
     shape = 2.0 ** -SHAPE_RESIDUAL_ORDER
     with np.errstate(invalid="ignore"):
         left = np.sqrt(np.maximum(0.0, (small ** 2 - shape * noise[rows] ** 2) / (1.0 - shape)))
-        drops = np.isfinite(left) & (small < SHAPE_RESIDUAL_DROP * noise[rows])
+        drops = np.isfinite(left) & (small < threshold * noise[rows])
     out = noise.copy()
     out[rows] = np.where(drops, left, noise[rows])
     return out

@@ -53,6 +53,10 @@ BIAS_NOISE_SCALE = 2.5e-4
 # above ~5.6 BIAS_NOISE_SCALE) the correction would move the estimate by less than 1/500 of
 # the two fits' difference, itself mostly the smaller fit's noise there.
 BIAS_MIN_GAIN = 1e-3
+# Share of the bias correction from which a row counts as corrected: half on, the measured
+# noise at BIAS_NOISE_SCALE of the radius (rows below it are checked for a shape's residual,
+# :func:`bias_noise`; rows above it keep the default radius under ``radius="auto"``).
+BIAS_HALF_GAIN = 0.5
 # Telling the shape's higher orders from noise in the quartic's residual (:func:`bias_noise`):
 # the residual of the shape falls like radius^SHAPE_RESIDUAL_ORDER (the quartic's first
 # omitted terms), to 2^-2.5 = 0.18 of itself in a ball sqrt 2 smaller, while noise stays; a
@@ -681,27 +685,27 @@ def bias_noise(search, xb, qb, indptr, indices, radius, noise, point_weights=Non
     they are what it measures. Rows whose correction ``noise`` leaves less than half on fit
     the jet again within ``radius / sqrt 2`` (normals ``qb``, the same lists and
     ``point_weights``); where its residual s falls below ``SHAPE_RESIDUAL_DROP`` of ``noise``
-    (less where noise alone could: ``SHAPE_FALSE_DROP``) the noise is what is left of s once the shape's share (``noise``, scaled by
-    ``2^-SHAPE_RESIDUAL_ORDER`` in variance) is taken out of it; elsewhere ``noise``. The
-    result's ``noise`` field stays the jet's residual."""
+    (less where noise alone could: ``SHAPE_FALSE_DROP``) the noise is what is left of s once
+    the shape's share (``noise``, scaled by ``2^-SHAPE_RESIDUAL_ORDER`` in variance) is taken
+    out of it; elsewhere ``noise``. The result's ``noise`` field stays the jet's residual."""
     gain = clean_fraction(noise, BIAS_NOISE_SCALE * radius)
-    rows = np.flatnonzero((gain < 0.5) & np.isfinite(noise))
+    rows = np.flatnonzero((gain < BIAS_HALF_GAIN) & np.isfinite(noise))
     if len(rows) == 0:
         return noise
     sub_ptr, sub_idx = _csr_rows(indptr, indices, rows)
     small = np.empty(len(rows))
     jet.local_jet(search.points, xb[rows], qb[rows], sub_ptr, sub_idx, radius / np.sqrt(2.0),
                   False, small, point_weights)
-    # the smaller fit's degrees of freedom: its points (x included) less the quartic's 15
+    # the smaller fit's degrees of freedom: its points (x included) less the quartic's terms
     owner = np.repeat(np.arange(len(rows)), np.diff(sub_ptr))
     offset = search.points[sub_idx] - xb[rows][owner]
     d2 = np.einsum("ij,ij->i", offset, offset)
     inside = np.bincount(owner[(d2 > 0.0) & (d2 <= 0.5 * radius * radius)],
                          minlength=len(rows))
-    dof = inside + 1 - 15
-    with np.errstate(invalid="ignore", divide="ignore"):
-        chance = np.sqrt(chi2.ppf(SHAPE_FALSE_DROP, np.maximum(dof, 1)) / np.maximum(dof, 1))
-    threshold = np.where(dof > 0, np.minimum(SHAPE_RESIDUAL_DROP, chance), 0.0)
+    dof = inside + 1 - jet._QUARTIC
+    some = np.maximum(dof, 1)
+    threshold = np.where(dof > 0, np.minimum(
+        SHAPE_RESIDUAL_DROP, np.sqrt(chi2.ppf(SHAPE_FALSE_DROP, some) / some)), 0.0)
     shape = 2.0 ** -SHAPE_RESIDUAL_ORDER
     with np.errstate(invalid="ignore"):
         left = np.sqrt(np.maximum(0.0, (small ** 2 - shape * noise[rows] ** 2) / (1.0 - shape)))

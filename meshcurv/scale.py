@@ -34,10 +34,10 @@ vertex R0 flags as an outlier keeps R0's row. Every field of the result's row is
 radius' row, and ``radius_used`` says which.
 
 The default radius runs first, and its rows whose bias correction is on (measured noise below
-about ``BIAS_NOISE_SCALE`` of the radius, :func:`corrected_rows`) keep it: the correction
+``BIAS_NOISE_SCALE`` of the radius, :func:`corrected_rows`) keep it: the correction
 removes the bias the ladder trades against noise, so the model above no longer describes
 them, and on clean data the ladder chose worse (torus 240 x 60 at its default radius: mean
-|dk| 0.0012 against 0.0006; ellipsoid 0.0007 against 0.0004). Where every row is such, the
+|dk| 0.0009 against 0.0006; ellipsoid 0.0007 against 0.0004). Where every row is such, the
 other radii are not run: clean input costs what the default does.
 """
 
@@ -49,7 +49,7 @@ from .neighbors import power_of_two_scale, typical_extent
 from .result import Status
 
 __all__ = ["ladder", "select", "run_auto", "LADDER_EXPONENTS", "NOISE_GAIN", "NORMAL_GAIN",
-           "MIN_SUPPORT", "MAX_ARC", "SMOOTH_NEIGHBORS", "CORRECTED_GAIN", "corrected_rows"]
+           "MIN_SUPPORT", "MAX_ARC", "SMOOTH_NEIGHBORS", "corrected_rows"]
 
 # Ladder r_j = R0 * 2^(j / 2): from half the default ball's points (~50) to 8 times (~800;
 # what position noise needs to draw level with estimators using normals, issue 15).
@@ -75,9 +75,6 @@ MIN_SUPPORT = 20
 MAX_ARC = 1.0
 # Estimated vertices whose error curves are averaged (the vertex itself included).
 SMOOTH_NEIGHBORS = 16
-# Least share of the bias correction at the default radius for which a row keeps that radius
-# (:func:`run_auto`): half on, the measured noise at BIAS_NOISE_SCALE of the radius.
-CORRECTED_GAIN = 0.5
 
 
 def ladder(r0, exponents=LADDER_EXPONENTS):
@@ -222,16 +219,15 @@ def _given_normal_variance(v, f, given_normals, r0, query, plan):
 
 
 def corrected_rows(result, plan):
-    """Rows (q,) bool of a fixed-radius ``result`` estimated where its bias correction is at
-    least :data:`CORRECTED_GAIN` on (the measured noise below
+    """Rows (q,) bool of a fixed-radius ``result`` estimated where its measured noise leaves
+    the bias correction at least :data:`meshcurv.pipeline.BIAS_HALF_GAIN` on (the noise below
     :data:`meshcurv.pipeline.BIAS_NOISE_SCALE` of the radius used; none with the correction
     off) and valid."""
     if not plan.bias_correction:
         return np.zeros(len(result.k1), dtype=bool)
-    used = np.asarray(result.radius_used, dtype=np.float64)
-    used = np.where(np.isfinite(used), used, result.radius)
-    gain = pipeline.clean_fraction(result.noise, pipeline.BIAS_NOISE_SCALE * used)
-    return np.asarray(result.valid, dtype=bool) & (gain >= CORRECTED_GAIN)
+    used = result.radius if result.radius_used is None else result.radius_used
+    gain = pipeline.clean_fraction(result.noise, pipeline.BIAS_NOISE_SCALE * np.asarray(used))
+    return np.asarray(result.valid, dtype=bool) & (gain >= pipeline.BIAS_HALF_GAIN)
 
 
 def run_auto(v, f, given_normals, r0, query, plan, progress=False, radii=None,
@@ -245,7 +241,7 @@ def run_auto(v, f, given_normals, r0, query, plan, progress=False, radii=None,
     The default radius runs first. Its rows whose bias correction is on
     (:func:`corrected_rows`) keep it: the correction extrapolates away the bias the ladder
     trades against noise, so the ladder's error model no longer describes them (clean torus
-    240 x 60: mean |dk| 0.0012 chosen by the ladder, 0.0005 at the corrected default). Where
+    240 x 60: mean |dk| 0.0009 chosen by the ladder, 0.0006 at the corrected default). Where
     every row is such, the ladder's other radii are not run at all."""
     radii = ladder(r0) if radii is None else list(radii)
     at_r0 = int(np.argmin(np.abs(np.asarray(radii) - r0)))

@@ -94,7 +94,7 @@ class Options:
         Half-width of each plane's slab, as a fraction of ``radius``. Wider slabs use more
         points (less noise) at the price of a blend of directions, which ``section_blend``
         models. Where the data are clean a point's weight tapers to 0 at the slab's edges
-        (:func:`meshcurv.fit.circle.add_point`).
+        (:func:`meshcurv.fit.circle.add_half_set`).
     min_points : int, default 3
         Fewest neighbors (besides x) a half-set needs to be fitted.
     min_spread : float, default 0.25

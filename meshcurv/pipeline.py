@@ -19,6 +19,7 @@ from .fit.extrapolate import BIAS_RATIO, extrapolate_to_zero
 from .neighbors import (MAX_BALL_FRACTION, BallGrid, KringWork, ball_counts, ball_grid,
                         ball_neighbors, edge_adjacency, kring_counts, kring_neighbors,
                         spatial_order)
+from .neighbors.csr import count_within, csr_rows
 from .normals import face_normal_error, face_vertex_normals, orient, orient_along, \
     orient_like, orient_mst, orient_towards, pca_normals, sphere_normals
 from .result import CurvatureResult, Status
@@ -692,20 +693,18 @@ def bias_noise(search, xb, qb, indptr, indices, radius, noise, point_weights=Non
     rows = np.flatnonzero((gain < BIAS_HALF_GAIN) & np.isfinite(noise))
     if len(rows) == 0:
         return noise
-    sub_ptr, sub_idx = _csr_rows(indptr, indices, rows)
+    sub_ptr, sub_idx = csr_rows(indptr, indices, rows)
     small = np.empty(len(rows))
-    jet.local_jet(search.points, xb[rows], qb[rows], sub_ptr, sub_idx, radius / np.sqrt(2.0),
+    centres = xb[rows]
+    jet.local_jet(search.points, centres, qb[rows], sub_ptr, sub_idx, radius / np.sqrt(2.0),
                   False, small, point_weights)
     # the smaller fit's degrees of freedom: its points (x included) less the quartic's terms
-    owner = np.repeat(np.arange(len(rows)), np.diff(sub_ptr))
-    offset = search.points[sub_idx] - xb[rows][owner]
-    d2 = np.einsum("ij,ij->i", offset, offset)
-    inside = np.bincount(owner[(d2 > 0.0) & (d2 <= 0.5 * radius * radius)],
-                         minlength=len(rows))
+    inside = count_within(search.points, centres, sub_ptr, sub_idx, 0.5 * radius * radius)
     dof = inside + 1 - jet._QUARTIC
-    some = np.maximum(dof, 1)
-    threshold = np.where(dof > 0, np.minimum(
-        SHAPE_RESIDUAL_DROP, np.sqrt(chi2.ppf(SHAPE_FALSE_DROP, some) / some)), 0.0)
+    # one quantile per distinct count (a few dozen), not per row
+    counts, which = np.unique(np.maximum(dof, 1), return_inverse=True)
+    spread = np.sqrt(chi2.ppf(SHAPE_FALSE_DROP, counts) / counts)[which]
+    threshold = np.where(dof > 0, np.minimum(SHAPE_RESIDUAL_DROP, spread), 0.0)
     shape = 2.0 ** -SHAPE_RESIDUAL_ORDER
     with np.errstate(invalid="ignore"):
         left = np.sqrt(np.maximum(0.0, (small ** 2 - shape * noise[rows] ** 2) / (1.0 - shape)))
@@ -734,7 +733,7 @@ def _bias_corrected(search, xb, qb, indptr, indices, radius, blend, plan, large,
         return large
     everything = len(rows) == len(xb)
     if not everything:
-        indptr, indices = _csr_rows(indptr, indices, rows)
+        indptr, indices = csr_rows(indptr, indices, rows)
         xb, qb, blend, gain, large_samples = (a[rows] for a in (xb, qb, blend, gain,
                                                                   large_samples))
         taper = None if taper is None else taper[rows]
@@ -768,16 +767,6 @@ def _bias_corrected(search, xb, qb, indptr, indices, radius, blend, plan, large,
     for a, c in zip(out, corrected):
         a[rows] = c
     return out
-
-
-def _csr_rows(indptr, indices, rows):
-    """The CSR lists ``(indptr, indices)`` of the rows ``rows`` (ascending int array) only."""
-    lengths = indptr[rows + 1] - indptr[rows]
-    sub_ptr = np.zeros(len(rows) + 1, dtype=indptr.dtype)
-    np.cumsum(lengths, out=sub_ptr[1:])
-    # entry j of the sub-lists is entry j - sub_ptr[row] + indptr[row] of the lists
-    shift = np.repeat(indptr[rows] - sub_ptr[:-1], lengths)
-    return sub_ptr, indices[np.arange(sub_ptr[-1], dtype=indptr.dtype) + shift]
 
 
 def _tilt(search, xb, qb, indptr, indices, radius, point_weights, fitted=None):

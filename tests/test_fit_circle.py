@@ -22,12 +22,16 @@ SLAB = 0.25
 
 def accumulate(u, v, h, beta, taper=-1.0):
     """The kernel's accumulator of one plane (direction +u, slab of half-width SLAB holding
+    every point) around x = 0 with n = z, in units of the radius (the ball's bound at 2, past
     every point); ``taper`` the slab taper's blend (negative: ``beta``)."""
     acc = np.zeros((2, circle.N_ACC))
-    ca, sa = np.array([1.0]), np.array([0.0])
-    for a, b, c in zip(u, v, h):
-        circle.add_point(acc, a, b, c, a * a + b * b + c * c, beta, ca, sa, SLAB, 0.0, 0.0,
-                         False, 1.0, taper)
+    points = np.column_stack([u, v, h])
+    planes = (np.array([1.0]), np.array([0.0]))
+    count = circle.accumulate_half_sets(
+        points, np.arange(len(u)), 0, len(u), np.zeros(3), np.array([0.0, 0.0, 1.0]),
+        np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]), 4.0, 1.0, beta, planes, SLAB,
+        acc, np.empty((len(u), circle.N_ROW)), None, None, taper)
+    assert count == len(u)
     return acc
 
 

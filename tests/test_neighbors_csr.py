@@ -33,3 +33,36 @@ def test_ball_lists_survive_an_underestimated_scratch():
     for q in (0, 1, 5, m - 1):
         expected = sorted(tree.query_ball_point(query[q], 0.1))
         assert list(indices[indptr[q]:indptr[q + 1]]) == expected
+
+
+def _random_lists(seed, m=50, longest=6, n=1000):
+    rng = np.random.default_rng(seed)
+    indptr = np.concatenate([[0], np.cumsum(rng.integers(0, longest, m))]).astype(np.int64)
+    return rng, indptr, rng.integers(0, n, indptr[-1])
+
+
+def test_csr_rows_are_the_lists_of_those_rows():
+    rng, indptr, indices = _random_lists(2)
+    rows = np.flatnonzero(rng.uniform(size=50) < 0.4)
+    sub_ptr, sub = csr.csr_rows(indptr, indices, rows)
+    assert len(sub_ptr) == len(rows) + 1
+    for k, i in enumerate(rows):
+        np.testing.assert_array_equal(sub[sub_ptr[k]:sub_ptr[k + 1]],
+                                      indices[indptr[i]:indptr[i + 1]])
+    empty_ptr, empty = csr.csr_rows(indptr, indices, rows[:0])
+    assert empty_ptr.tolist() == [0] and len(empty) == 0
+
+
+def test_count_within_counts_the_entries_inside_the_ball_as_numpy_does():
+    """The kernel against its numpy specification: entries whose squared distance from the
+    list's centre is in (0, r2max]; a point listed at the centre itself is not counted."""
+    rng, indptr, indices = _random_lists(3, longest=40, n=300)
+    points = rng.uniform(-1.0, 1.0, (300, 3))
+    centres = points[rng.integers(0, 300, len(indptr) - 1)]
+    owner = np.repeat(np.arange(len(centres)), np.diff(indptr))
+    d2 = np.sum((points[indices] - centres[owner]) ** 2, axis=1)
+    for r2max in (0.0, 0.3, 1.0, 12.0):
+        expected = np.bincount(owner[(d2 > 0.0) & (d2 <= r2max)], minlength=len(centres))
+        np.testing.assert_array_equal(csr.count_within(points, centres, indptr, indices, r2max),
+                                      expected)
+    assert 0 < csr.count_within(points, centres, indptr, indices, 0.3).sum() < len(indices)

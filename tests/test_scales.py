@@ -131,18 +131,3 @@ def test_the_bias_correction_tells_a_coarse_mesh_shape_from_noise():
     noisy = surfaces.add_normal_noise(s, 0.001, seed=4)
     noise, bias = _block_noise(noisy, 0.45)
     assert np.mean(bias == noise) > 0.99
-
-
-def test_csr_rows_are_the_lists_of_those_rows():
-    rng = np.random.default_rng(2)
-    lengths = rng.integers(0, 6, 50)
-    indptr = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64)
-    indices = rng.integers(0, 1000, indptr[-1])
-    rows = np.flatnonzero(rng.uniform(size=50) < 0.4)
-    sub_ptr, sub = pipeline._csr_rows(indptr, indices, rows)
-    assert len(sub_ptr) == len(rows) + 1
-    for k, i in enumerate(rows):
-        np.testing.assert_array_equal(sub[sub_ptr[k]:sub_ptr[k + 1]],
-                                      indices[indptr[i]:indptr[i + 1]])
-    empty_ptr, empty = pipeline._csr_rows(indptr, indices, rows[:0])
-    assert empty_ptr.tolist() == [0] and len(empty) == 0

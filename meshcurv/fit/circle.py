@@ -104,18 +104,28 @@ def circle_fit(acc, k, unit_norm, b, ev, mu=0.0):
     return -(-b13 * b22 + b12 * b23) / det
 
 
+# Columns of the per-neighbor rows that :func:`accumulate_half_sets` gathers before it sums
+# each half-set: frame coordinates u, v, h and r2 (units of the radius), the distance weight
+# (times the point's own), cos 2phi and sin 2phi of the neighbor's direction, the tangent part
+# (bu, bv) of its normal in the frame, and 1 where that normal gives a row (else 0).
+_U, _V, _HT, _R2, _W, _C2, _S2, _BU, _BV, _HAS = range(10)
+N_ROW = 10
+
+
 @njit(cache=True)
 def accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta, planes, slab,
-                         acc, point_normals=None, point_weights=None, taper=-1.0):
+                         acc, rows, point_normals=None, point_weights=None, taper=-1.0):
     """Accumulate the neighbors ``points[nbr[lo:hi]]`` of x into the half-sets' sums; their count.
 
     Each neighbor within the ball (``r2max`` the squared radius, ``inv_r`` its inverse; model
     units) is expressed in the frame (tu, tv, n) in units of the radius and added, with weight
     ``(1 - beta) + beta (1 - r^2)^WEIGHT_POWER`` (times the slab's taper of blend ``taper``,
-    ``beta`` where negative; see :func:`add_point`), to the row of ``acc`` ((2 ndir, N_ACC),
-    zeroed here) of every half-set whose slab (half-width ``slab``) holds it: half-set i on
-    the positive side of plane i's direction ``planes[0][i], planes[1][i]`` (cos, sin), i + ndir
-    on the negative side. Returns the number of neighbors in the ball.
+    ``beta`` where negative; see :func:`add_half_set`), to the row of ``acc`` ((2 ndir,
+    N_ACC), overwritten) of every half-set whose slab (half-width ``slab``) holds it: half-set
+    i on the positive side of plane i's direction ``planes[0][i], planes[1][i]`` (cos, sin),
+    i + ndir on the negative side. ``rows`` ((at least hi - lo, N_ROW), scratch) holds the
+    neighbors' frame coordinates between the two passes. Returns the number of neighbors in
+    the ball.
 
     ``point_normals`` ((n, 3) unit, aligned with ``points``; NaN rows give no normal row) add
     each neighbor's normal row, centred on the ball's weighted mean position and normal (a
@@ -125,10 +135,8 @@ def accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta, 
     """
     ca, sa = planes[0], planes[1]
     ndir = ca.shape[0]
-    for k in range(2 * ndir):
-        for c in range(N_ACC):
-            acc[k, c] = 0.0
     n_nbr = 0
+    m = 0
     # weighted sums over the ball's normal rows: weight, u, v, bu, bv (the means c and nbar)
     sw, su, sv, sbu, sbv = 0.0, 0.0, 0.0, 0.0, 0.0
     for j in range(lo, hi):
@@ -142,6 +150,7 @@ def accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta, 
         u = qx * tu[0] + qy * tu[1] + qz * tu[2]
         v = qx * tv[0] + qy * tv[1] + qz * tv[2]
         h = qx * n[0] + qy * n[1] + qz * n[2]
+        w = ((1.0 - beta) + beta * (1.0 - r2) ** WEIGHT_POWER) * pw
         bu, bv, has_normal = 0.0, 0.0, False
         if point_normals is not None:
             p = nbr[j]
@@ -155,16 +164,102 @@ def accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta, 
                         + point_normals[p, 2] * tv[2])
             has_normal = np.isfinite(bu + bv) and u * u + v * v > 0.0
             if has_normal:
-                w = ((1.0 - beta) + beta * (1.0 - r2) ** WEIGHT_POWER) * pw
                 sw += w
                 su += w * u
                 sv += w * v
                 sbu += w * bu
                 sbv += w * bv
-        add_point(acc, u, v, h, r2, beta, ca, sa, slab, bu, bv, has_normal, pw, taper)
+        t2 = u * u + v * v
+        if t2 <= 0.0:          # on the normal line: on every plane, in no half-set
+            continue
+        rows[m, _U] = u
+        rows[m, _V] = v
+        rows[m, _HT] = h
+        rows[m, _R2] = r2
+        rows[m, _W] = w
+        rows[m, _C2] = (u * u - v * v) / t2
+        rows[m, _S2] = 2.0 * u * v / t2
+        rows[m, _BU] = bu
+        rows[m, _BV] = bv
+        rows[m, _HAS] = 1.0 if has_normal else 0.0
+        m += 1
+    if taper < 0.0:
+        taper = beta
+    for k in range(2 * ndir):
+        add_half_set(acc, k, rows, m, ca[k % ndir], sa[k % ndir], k < ndir, slab, taper)
     if sw > 0.0:
         center_normal_rows(acc, ca, sa, su / sw, sv / sw, sbu / sw, sbv / sw)
     return n_nbr
+
+
+@njit(cache=True)
+def add_half_set(acc, k, rows, m, ce, se, positive, slab, taper):
+    """Sums of half-set k into ``acc[k]`` (overwritten) from the neighbors ``rows[:m]`` (see
+    :func:`accumulate_half_sets`): those in the slab of half-width ``slab`` about the plane
+    of direction (``ce``, ``se``) (cos, sin), on its ``positive`` side (e >= 0) or the other.
+
+    Each point's weight is its distance weight times the slab's taper
+    ``(1 - taper) + taper (1 - (s / slab)^2)^2`` at its distance s from the plane: where the
+    data are clean a point entering or leaving a slab moves the fit smoothly, as the distance
+    weights do at the ball's edge. A hard slab edge made the clean fits' error jump from vertex
+    to vertex with the sampling (measured when the taper came in: regular torus 240 x 60 at R
+    0.3, bias-corrected mean |dk| 0.0026 -> 0.0007; ellipsoid 0.0026 -> 0.0010); the taper
+    halves a slab's points, so noisy data (taper 0) keep every slab point at full weight.
+    Points with a normal row also add it: a = e, b = (bu, bv) . e, s, all relative to x
+    (:func:`center_normal_rows` moves them to the ball's means). The sums are local (one
+    half-set at a time) rather than scattered into ``acc`` point by point: 1.2-1.4x faster, the
+    same sums in the same order."""
+    n_, h_, hh, r_, hr, rr, rc, rrc, rs, rrs, cnt, emax = (0.0,) * 12
+    a_, b_, s_, aa, ab, bb, as_, bs, ss, nw, ncnt = (0.0,) * 11
+    for j in range(m):
+        u = rows[j, _U]
+        v = rows[j, _V]
+        s = -se * u + ce * v
+        if abs(s) > slab:
+            continue
+        e = ce * u + se * v
+        if (e >= 0.0) != positive:
+            continue
+        h = rows[j, _HT]
+        r2 = rows[j, _R2]
+        q = 1.0 - (s / slab) ** 2
+        w = rows[j, _W] * ((1.0 - taper) + taper * q * q)
+        wr = w * r2
+        wrr = wr * r2
+        n_ += w
+        h_ += w * h
+        hh += w * h * h
+        r_ += wr
+        hr += wr * h
+        rr += wrr
+        rc += wr * rows[j, _C2]
+        rrc += wrr * rows[j, _C2]
+        rs += wr * rows[j, _S2]
+        rrs += wrr * rows[j, _S2]
+        cnt += 1.0
+        emax = max(emax, abs(e))
+        if rows[j, _HAS] > 0.0:
+            # along plane i's own direction on both sides: a, b and s all change sign with the
+            # side's direction, their products (all the fits use) do not
+            b = ce * rows[j, _BU] + se * rows[j, _BV]
+            a_ += w * e
+            b_ += w * b
+            s_ += w * s
+            aa += w * e * e
+            ab += w * e * b
+            bb += w * b * b
+            as_ += w * e * s
+            bs += w * b * s
+            ss += w * s * s
+            nw += w
+            ncnt += 1.0
+    acc[k, _N], acc[k, _H], acc[k, _HH], acc[k, _R], acc[k, _HR], acc[k, _RR] = (
+        n_, h_, hh, r_, hr, rr)
+    acc[k, _RC], acc[k, _RRC], acc[k, _RS], acc[k, _RRS], acc[k, _CNT], acc[k, _EMAX] = (
+        rc, rrc, rs, rrs, cnt, emax)
+    acc[k, _A], acc[k, _B], acc[k, _S], acc[k, _AA], acc[k, _AB], acc[k, _BB] = (
+        a_, b_, s_, aa, ab, bb)
+    acc[k, _AS], acc[k, _BS], acc[k, _SS], acc[k, _NW], acc[k, _NCNT] = as_, bs, ss, nw, ncnt
 
 
 @njit(cache=True)
@@ -188,71 +283,6 @@ def center_normal_rows(acc, ca, sa, cu, cv, du, dv):
         acc[k, _A] = a - ce * w
         acc[k, _B] = b - de * w
         acc[k, _S] = s - cp * w
-
-
-@njit(cache=True)
-def add_point(acc, u, v, h, r2, beta, ca, sa, slab, bu=0.0, bv=0.0, has_normal=False,
-              point_weight=1.0, taper=-1.0):
-    """Add one neighbor at frame coordinates (u, v, h), squared distance r2 (units of the
-    radius), to the accumulator rows of the half-sets whose slabs hold it; with
-    ``has_normal`` also its normal row, (bu, bv) the tangent components of n_p (before
-    :func:`center_normal_rows`); its weight is multiplied by ``point_weight``.
-
-    In each slab the weight is ``(1 - beta) + beta (1 - r^2)^WEIGHT_POWER`` times the slab's
-    taper ``(1 - taper) + taper (1 - (s / slab)^2)^2`` at the point's distance s from the
-    plane (``taper`` < 0: ``beta``): where the data are clean a point entering or leaving a
-    slab moves the fit smoothly, as the distance weights do at the ball's edge. A hard slab
-    edge made the clean fits' error jump from vertex to vertex with the sampling (measured
-    when the taper came in: regular torus 240 x 60 at R 0.3, bias-corrected mean |dk| 0.0026
-    -> 0.0007; ellipsoid 0.0026 -> 0.0010); the taper halves a slab's points, so noisy data
-    (taper 0) keep every slab point at full weight."""
-    t2 = u * u + v * v
-    if t2 <= 0.0:
-        return
-    ndir = ca.shape[0]
-    if taper < 0.0:
-        taper = beta
-    w0 = ((1.0 - beta) + beta * (1.0 - r2) ** WEIGHT_POWER) * point_weight
-    c2 = (u * u - v * v) / t2
-    s2 = 2.0 * u * v / t2
-    for i in range(ndir):
-        s = -sa[i] * u + ca[i] * v
-        if abs(s) > slab:
-            continue
-        e = ca[i] * u + sa[i] * v
-        k = i if e >= 0.0 else i + ndir
-        q = 1.0 - (s / slab) ** 2
-        w = w0 * ((1.0 - taper) + taper * q * q)
-        wr = w * r2
-        wrr = wr * r2
-        acc[k, _N] += w
-        acc[k, _H] += w * h
-        acc[k, _HH] += w * h * h
-        acc[k, _R] += wr
-        acc[k, _HR] += wr * h
-        acc[k, _RR] += wrr
-        acc[k, _RC] += wr * c2
-        acc[k, _RRC] += wrr * c2
-        acc[k, _RS] += wr * s2
-        acc[k, _RRS] += wrr * s2
-        acc[k, _CNT] += 1.0
-        if abs(e) > acc[k, _EMAX]:
-            acc[k, _EMAX] = abs(e)
-        if has_normal:
-            # along plane i's own direction on both sides: a, b and s all change sign with the
-            # side's direction, their products (all the fits use) do not
-            b = ca[i] * bu + sa[i] * bv
-            acc[k, _A] += w * e
-            acc[k, _B] += w * b
-            acc[k, _S] += w * s
-            acc[k, _AA] += w * e * e
-            acc[k, _AB] += w * e * b
-            acc[k, _BB] += w * b * b
-            acc[k, _AS] += w * e * s
-            acc[k, _BS] += w * b * s
-            acc[k, _SS] += w * s * s
-            acc[k, _NW] += w
-            acc[k, _NCNT] += 1.0
 
 
 @njit(cache=True)

@@ -13,7 +13,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..linalg import CHUNK
-from .circle import N_ACC, accumulate_half_sets, half_set_samples, normal_row_weight
+from .circle import N_ACC, N_ROW, accumulate_half_sets, half_set_samples, normal_row_weight
 from .constants import (MIN_DIRECTION_SPREAD, PLANE_OFFSET, STATUS_DEGENERATE_DIRECTIONS,
                         STATUS_ILL_POSED_FIT, STATUS_NO_NORMAL, STATUS_NO_POSITION, STATUS_OK,
                         STATUS_TOO_FEW_HALF_SETS, STATUS_TOO_FEW_NEIGHBORS)
@@ -38,8 +38,8 @@ def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, wo
     opts : ``(ndir, slab, min_points, min_spread, unit_norm, corrected, half_frequency,
         robust)`` as in :func:`curvature_cga`
     planes : ``(ca, sa, dirs)`` from :func:`sampling_planes`
-    work : ``(acc, kappa, rows, active, scratch, mat, rhs, sol, b3, ev, mix)`` scratch arrays
-        (see :func:`curvature_cga`)
+    work : ``(acc, kappa, rows, active, scratch, mat, rhs, sol, b3, ev, mix, nbr_rows)``
+        scratch arrays (see :func:`curvature_cga`; ``nbr_rows`` (at least hi - lo, N_ROW))
     tu, tv : (3,) float64 outputs, the tangent frame
     point_normals : (n, 3) float64 unit normals aligned with ``points``, or None: each circle
         fit then also fits its neighbors' normals
@@ -49,7 +49,7 @@ def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, wo
     row_weight : float, the normal rows' weight mu to use instead of measuring it (NaN:
         measure it, times ``normal_gain``)
     taper : float in [0, 1], the blend of the slabs' taper
-        (:func:`meshcurv.fit.circle.add_point`); negative: ``beta``
+        (:func:`meshcurv.fit.circle.add_half_set`); negative: ``beta``
 
     Returns
     -------
@@ -62,12 +62,12 @@ def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, wo
     """
     ndir, slab, min_points, min_spread, unit_norm, corrected, half_frequency, robust = opts
     ca, sa, dirs = planes
-    acc, kappa, rows, active, scratch, mat, rhs, sol, b3, ev, mix = work
+    acc, kappa, rows, active, scratch, mat, rhs, sol, b3, ev, mix, nbr_rows = work
     inv_r = 1.0 / radius
     r2max = radius * radius
     tangent_frame(points, nbr, lo, hi, x, n, r2max, tu, tv, rank, point_weights)
     n_nbr = accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta,
-                                 (ca, sa), slab, acc, point_normals,
+                                 (ca, sa), slab, acc, nbr_rows, point_normals,
                                  point_weights, taper)
     mu = 0.0
     if point_normals is not None:
@@ -170,18 +170,21 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
         written there. A second call over the same points with the first call's weights fits
         the same combination of rows (the bias correction's two radii).
     taper : (m,) float64 in [0, 1], optional, per query point: the blend of the slabs' taper
-        (:func:`meshcurv.fit.circle.add_point`); default ``blend``.
+        (:func:`meshcurv.fit.circle.add_half_set`); default ``blend``.
     """
     k1, k2, d1, d2, n_samples, residual, n_neighbors, status = out
     ndir = opts[0]
     m = query_points.shape[0]
     nh = 2 * ndir
     planes = sampling_planes(ndir)
+    longest = 0
+    for q in range(m):
+        longest = max(longest, indptr[q + 1] - indptr[q])
     nchunks = (m + CHUNK - 1) // CHUNK
     for c in prange(nchunks):
         work = (np.empty((nh, N_ACC)), np.empty(nh), np.empty((nh, 5)), np.empty(nh),
                 np.empty(nh), np.empty((5, 5)), np.empty(5), np.empty(5), np.empty((3, 3)),
-                np.empty(3), np.empty((nh, 2)))
+                np.empty(3), np.empty((nh, 2)), np.empty((longest, N_ROW)))
         tu = np.empty(3)
         tv = np.empty(3)
         x = np.empty(3)

@@ -65,3 +65,41 @@ def gather_streams(counts, buf, used, nthreads, per, cap):
         for j in range(used[t]):
             indices[o + j] = buf[lo + j]
     return indices
+
+
+@njit(parallel=True, cache=True)
+def csr_rows(indptr, indices, rows):
+    """The CSR lists ``(sub_indptr, sub_indices)`` of the queries ``rows`` ((k,) int, each in
+    0 .. m - 1) only, in that order: list i of the result is list ``rows[i]`` of ``(indptr,
+    indices)``, same dtypes."""
+    k = rows.shape[0]
+    sub_ptr = np.zeros(k + 1, dtype=indptr.dtype)
+    for i in range(k):
+        sub_ptr[i + 1] = sub_ptr[i] + indptr[rows[i] + 1] - indptr[rows[i]]
+    sub_idx = np.empty(sub_ptr[k], dtype=indices.dtype)
+    for i in prange(k):
+        lo = indptr[rows[i]]
+        for j in range(sub_ptr[i + 1] - sub_ptr[i]):
+            sub_idx[sub_ptr[i] + j] = indices[lo + j]
+    return sub_ptr, sub_idx
+
+
+@njit(parallel=True, cache=True)
+def count_within(points, centres, indptr, indices, r2max):
+    """Entries of each list within a ball: ``out[i]`` (int64) counts the j in list i with
+    ``0 < |points[j] - centres[i]|^2 <= r2max`` (model units squared; the centre itself and
+    coincident points are not counted)."""
+    m = centres.shape[0]
+    out = np.zeros(m, dtype=np.int64)
+    for i in prange(m):
+        c = 0
+        for e in range(indptr[i], indptr[i + 1]):
+            j = indices[e]
+            dx = points[j, 0] - centres[i, 0]
+            dy = points[j, 1] - centres[i, 1]
+            dz = points[j, 2] - centres[i, 2]
+            d2 = dx * dx + dy * dy + dz * dz
+            if d2 > 0.0 and d2 <= r2max:
+                c += 1
+        out[i] = c
+    return out

@@ -30,7 +30,8 @@ def accumulate(u, v, h, beta, taper=-1.0):
     count = circle.accumulate_half_sets(
         points, np.arange(len(u)), 0, len(u), np.zeros(3), np.array([0.0, 0.0, 1.0]),
         np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]), 4.0, 1.0, beta, planes, SLAB,
-        acc, np.empty((len(u), circle.N_ROW)), None, None, taper)
+        acc, np.empty((len(u), circle.N_ROW)), np.empty((2, len(u)), dtype=np.int64), None,
+        None, taper)
     assert count == len(u)
     return acc
 

@@ -38,8 +38,9 @@ def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, wo
     opts : ``(ndir, slab, min_points, min_spread, unit_norm, corrected, half_frequency,
         robust)`` as in :func:`curvature_cga`
     planes : ``(ca, sa, dirs)`` from :func:`sampling_planes`
-    work : ``(acc, kappa, rows, active, scratch, mat, rhs, sol, b3, ev, mix, nbr_rows)``
-        scratch arrays (see :func:`curvature_cga`; ``nbr_rows`` (at least hi - lo, N_ROW))
+    work : ``(acc, kappa, rows, active, scratch, mat, rhs, sol, b3, ev, mix, nbr_rows,
+        members)`` scratch arrays (see :func:`curvature_cga`; the last two those of
+        :func:`meshcurv.fit.circle.accumulate_half_sets`)
     tu, tv : (3,) float64 outputs, the tangent frame
     point_normals : (n, 3) float64 unit normals aligned with ``points``, or None: each circle
         fit then also fits its neighbors' normals
@@ -62,12 +63,12 @@ def estimate_one(points, nbr, lo, hi, x, n, rank, radius, beta, opts, planes, wo
     """
     ndir, slab, min_points, min_spread, unit_norm, corrected, half_frequency, robust = opts
     ca, sa, dirs = planes
-    acc, kappa, rows, active, scratch, mat, rhs, sol, b3, ev, mix, nbr_rows = work
+    acc, kappa, rows, active, scratch, mat, rhs, sol, b3, ev, mix, nbr_rows, members = work
     inv_r = 1.0 / radius
     r2max = radius * radius
     tangent_frame(points, nbr, lo, hi, x, n, r2max, tu, tv, rank, point_weights)
     n_nbr = accumulate_half_sets(points, nbr, lo, hi, x, n, tu, tv, r2max, inv_r, beta,
-                                 (ca, sa), slab, acc, nbr_rows, point_normals,
+                                 (ca, sa), slab, acc, nbr_rows, members, point_normals,
                                  point_weights, taper)
     mu = 0.0
     if point_normals is not None:
@@ -184,7 +185,8 @@ def curvature_cga(points, query_points, query_normals, indptr, indices, radius, 
     for c in prange(nchunks):
         work = (np.empty((nh, N_ACC)), np.empty(nh), np.empty((nh, 5)), np.empty(nh),
                 np.empty(nh), np.empty((5, 5)), np.empty(5), np.empty(5), np.empty((3, 3)),
-                np.empty(3), np.empty((nh, 2)), np.empty((longest, N_ROW)))
+                np.empty(3), np.empty((nh, 2)), np.empty((longest, N_ROW)),
+                np.empty((2, longest), dtype=np.int64))
         tu = np.empty(3)
         tv = np.empty(3)
         x = np.empty(3)

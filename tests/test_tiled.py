@@ -382,3 +382,26 @@ def test_unreachable_scheduler_fails_in_one_line_and_leaves_no_work_folder(laz_i
     with pytest.raises(OSError, match="^cannot connect to the Dask scheduler tcp://127.0.0.1:9: "):
         annotate_tiled(path, str(tmp_path / "o.laz"), radius, 30.0, scheduler="tcp://127.0.0.1:9")
     assert sorted(os.listdir(tmp_path)) == before
+
+
+@pytest.mark.parametrize("order", ["random", "strips"])
+def test_default_radius_from_the_first_chunk_is_the_whole_files(tmp_path, order):
+    """The default radius of a tiled run comes from the file's first chunk. In a file in random
+    order that chunk is a sample of the whole, 5 % of it here: its own default radius is
+    sqrt(20) = 4.5x too large, and the chunk's share of the points where it lies brings it
+    back. In a file sorted in strips the first chunk is all the points of one strip, and the
+    radius is its own."""
+    from meshcurv.tiled.run import _first_chunk_radius, _header_summary
+
+    pts = wavy_cloud(60_000, 200.0, seed=5)
+    if order == "strips":
+        pts = pts[np.lexsort((pts[:, 1], np.floor(pts[:, 0] / 10.0)))]
+    path = str(tmp_path / "cloud.las")
+    stored = write_las(path, pts)
+    n, mins, maxs, _ = _header_summary(path)
+    whole = meshcurv.default_radius(stored)
+    chunk = 3000
+    plain = meshcurv.default_radius(stored[:chunk])
+    assert plain / whole == pytest.approx(4.47 if order == "random" else 1.0, rel=0.1)
+    # a 3000-point sample's median nearest-neighbour distance scatters by ~2 %
+    assert _first_chunk_radius(path, chunk, n, mins, maxs) == pytest.approx(whole, rel=0.05)

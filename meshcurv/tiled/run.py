@@ -3,6 +3,7 @@
 scatter -> normals -> curvature -> write (see :mod:`meshcurv.tiled`)."""
 
 import contextlib
+import math
 import os
 import shutil
 import tempfile
@@ -179,7 +180,9 @@ def annotate_tiled(in_path, out_path, radius=None, tile_size=None, *, orientatio
     in_path, out_path : str, .las or .laz (``out_path`` must differ from ``in_path``; .laz is
         compressed with lazrs). Both, and ``work_dir``, must be visible to every worker (on
         several machines: a shared file system).
-    radius : float, model units. Default: :func:`meshcurv.default_radius` of the first chunk.
+    radius : float, model units. Default: :func:`meshcurv.default_radius` of the file,
+        estimated from its first chunk (also where the file is in random order, see
+        :func:`_first_chunk_radius`).
     tile_size : float, model units, side of the square x, y tiles. Default: about 10^6 points
         per tile from the header's extent.
     orientation : "mst", "+z" or (3,) viewpoint
@@ -233,7 +236,7 @@ def annotate_tiled(in_path, out_path, radius=None, tile_size=None, *, orientatio
     n_points, mins, maxs, has_normals = _header_summary(in_path)
     _refuse_text_radius(radius, " or None, got {!r} (a data-driven radius needs the whole cloud)")
     if radius is None:
-        radius = _first_chunk_radius(in_path, chunk_size)
+        radius = _first_chunk_radius(in_path, chunk_size, n_points, mins, maxs)
     radius = _positive_length("radius", radius)
     if tile_size is None:
         tile_size = default_tile_size(n_points, maxs[:2] - mins[:2], radius)
@@ -281,12 +284,54 @@ def _header_summary(in_path):
                 np.asarray(header.maxs, float), las.normal_dims(header.point_format) is not None)
 
 
-def _first_chunk_radius(in_path, chunk_size):
-    """:func:`meshcurv.default_radius` of the first ``chunk_size`` points (NaN if none)."""
+def _first_chunk_radius(in_path, chunk_size, n_points, mins, maxs):
+    """:func:`meshcurv.default_radius` of the whole file, estimated from its first
+    ``chunk_size`` points (NaN if none); ``n_points``, ``mins``, ``maxs``: the header's count
+    and bounds.
+
+    The first points of a file sorted by acquisition (strips, scan lines) are all the points
+    of a part of it; those of a file in random order are a sample of the whole, whose density
+    is their share of the true one, and the radius that holds ~100 of them holds that many
+    over the share of all points (a 50M-point file in random order: 100x too many). The share
+    the chunk holds of the points where it lies is estimated from the x, y cells of a coarse
+    grid over the header's bounds it occupies: its count over the count those cells would
+    hold at the file's mean density (between the chunk's share of the file and 1), and the
+    radius scales by its square root."""
     from ..neighbors import default_radius
 
     first = next(las.iter_las_chunks(in_path, chunk_size, stop=chunk_size), None)
-    return default_radius(first[1]) if first is not None else float("nan")
+    if first is None:
+        return float("nan")
+    points = first[1]
+    return default_radius(points) * math.sqrt(_sampled_share(points, n_points, mins, maxs))
+
+
+def _sampled_share(points, n_points, mins, maxs):
+    """The share (in [len(points) / n_points, 1]) of the file's points near ``points`` that
+    ``points`` holds (see :func:`_first_chunk_radius`)."""
+    xy = points[np.isfinite(points).all(axis=1), :2]
+    c = len(xy)
+    lo = np.asarray(mins[:2], float)
+    extent = np.asarray(maxs[:2], float) - lo
+    if c == 0 or n_points <= c or not np.all(extent > 0.0):
+        return 1.0
+    unit = np.clip((xy - lo) / extent, 0.0, 1.0)
+
+    def occupied(side):
+        """Cells of a side x side grid over the bounds holding a point; their area (unit 1)."""
+        cell = np.minimum((unit * side).astype(np.int64), side - 1)
+        return len(np.unique(cell[:, 0] * side + cell[:, 1])) / float(side * side)
+
+    # cells a random sample of this size fills with ~16 points each; then, twice, cells that
+    # the chunk's own density fills with ~4 (finer where it is a compact part, whose edge
+    # cells, partly empty, would count as its area; 4 leave 2 % of the cells of a random
+    # sample empty)
+    side = max(1, min(4096, int(math.sqrt(c / 16.0))))
+    for _ in range(2):
+        density = c / occupied(side)          # points per unit area where the chunk lies
+        side = max(side, min(4096, int(math.sqrt(density / 4.0))))
+    expected = n_points * occupied(side)      # the points there at the file's mean density
+    return float(np.clip(c / expected, c / n_points, 1.0))
 
 
 def _write_output(in_path, out_path, work, own_tiles, names, radius, chunk_size, float_type,

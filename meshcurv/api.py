@@ -239,8 +239,11 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
     if isinstance(radius, str) and radius == "auto":
         r0 = _resolve_radius(None, v, f)
         radii = _auto_ladder(v, f, r0) if np.isfinite(r0) else [r0]
-        return scale_select.run_auto(v, f, given_normals, r0, query, plan, progress,
-                                     radii=radii, run_radii=_run_radii)
+        # the ladder widens the balls where the noise asks for it: the normal field stays at
+        # each radius (see Plan.wide_field)
+        return scale_select.run_auto(v, f, given_normals, r0, query,
+                                     plan._replace(wide_field=False), progress, radii=radii,
+                                     run_radii=_run_radii)
     radius = _resolve_radius(radius, v, f)
     return _run_one(v, f, given_normals, radius, query, plan, progress)
 

@@ -916,7 +916,8 @@ def _prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progre
         block_nv = _pca_field(v, face_normals, s, finite, r, plan, progress, weights, plain,
                               face_weight)
     field = block_nv
-    if plan.normal_constraints and plan.refine and nv is not None and f is None:
+    if (plan.normal_constraints and plan.refine and nv is not None and f is None
+            and plan.wide_field):
         # a cloud's estimated normals (the spanning tree's, or a tile's) fitted again for the
         # neighbors' normal rows over a ball of FIELD_RATIO times the radius, with the outlier
         # weights (a stray point tilts the plane fits of all its neighbors), keeping their

@@ -891,7 +891,7 @@ class _Scale(NamedTuple):
 
 def _prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progress):
     """The :class:`_Scale` of radius ``r`` over the search ``s``."""
-    score = weights = tree = plain = None
+    score = weights = weight = tree = plain = None
     # not from the lists: before the outlier pass, whose plane fits take the faces' sides
     start = None if plan.normals == "mst" else _start_normals(v, f, given_normals, r, s,
                                                               finite, plan, progress)
@@ -923,10 +923,7 @@ def _prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progre
         # weights (a stray point tilts the plane fits of all its neighbors), keeping their
         # sides
         wide = ball_search(v, finite, FIELD_RATIO * r)
-        wide_weights = None
-        if weights is not None:
-            by_vertex = weights if s.rank is None else _by_vertex(weights, s.rank, len(v))
-            wide_weights = by_vertex if wide.rank is None else by_vertex[wide.rank]
+        wide_weights = weight if weight is None or wide.rank is None else weight[wide.rank]
         field = _pca_field(v, nv, wide, finite, FIELD_RATIO * r, plan, progress, wide_weights)
     elif (plan.normal_constraints and weights is not None and plan.refine
             and nv is not None and np.any(weights < 1.0)):
@@ -936,14 +933,6 @@ def _prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progre
         field = _pca_field(v, nv, s, finite, r, plan, progress, weights)
     return _Scale(r, s, score, weights, nv, face_normals, note, block_nv, given_a2,
                   _normal_field(field, s, plan), face_weight)
-
-
-def _by_vertex(rows_values, rank, n):
-    """Values (n,) by vertex of ``rows_values``, given by row of a search's points whose
-    ``rank`` (input index of each row) it holds; NaN for vertices no row holds."""
-    out = np.full(n, np.nan)
-    out[rank] = rows_values
-    return out
 
 
 def _needs_support(out, plan):

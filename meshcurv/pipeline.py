@@ -672,8 +672,11 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2
     # the share of the bias correction the measured noise leaves; the slabs' taper trades
     # points for a smooth edge and is on where the correction is, for the same reason (a
     # smaller systematic error against more noise)
+    # (the shape check's extra jet fit only where the correction or the taper uses it)
+    used = plan.bias_correction or plan.weighting == "auto"
     bias_gain = clean_fraction(bias_noise(search, xb, qb, indptr, indices, radius, noise,
-                                          point_weights), BIAS_NOISE_SCALE * radius)
+                                          point_weights) if used else noise,
+                               BIAS_NOISE_SCALE * radius)
     taper = bias_gain if plan.weighting == "auto" else blend
     # estimated normals' rows: by the measured noise, none where it could not be measured
     constraints = (None, None, None) if field_of_points is None else (

@@ -389,7 +389,8 @@ def stage_times(v, f, normals, radius):
     # the kernels the pipeline calls from Python, by module
     originals = {(module, name): fn for module in (grid, kring, pca, sphere, orient, jet, outliers, fused)
                  for name, fn in vars(module).items()
-                 if hasattr(fn, "py_func") and not name.startswith("_")}
+                 if hasattr(fn, "py_func") and not name.startswith("_")
+                 and fn.py_func.__module__ == module.__name__}
 
     def timed(name, fn):
         def call(*args, **kwargs):

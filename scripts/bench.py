@@ -375,7 +375,8 @@ def first_call_times():
 def stage_times(v, f, normals, radius):
     """Where the time of a meshcurv call goes: seconds per compiled kernel, and the rest.
 
-    Every public compiled kernel (meshcurv.neighbors, .normals, .fit) is wrapped with a timer for the duration of one
+    Every public compiled kernel (meshcurv.neighbors, .normals, .fit) that no other kernel
+    calls is wrapped with a timer for the duration of one
     call with the normals given and one with them estimated; the kernels are the leaves of the
     pipeline (neighbour search, normals, orientation, circle fits), and what remains of the
     call's time is numpy and Python glue. Returns ``{mode: {stage: seconds}}``.
@@ -386,11 +387,16 @@ def stage_times(v, f, normals, radius):
     from meshcurv.normals import orient, pca, sphere
 
     spent = {}
-    # the kernels the pipeline calls from Python, by module
-    originals = {(module, name): fn for module in (grid, kring, pca, sphere, orient, jet, outliers, fused)
-                 for name, fn in vars(module).items()
-                 if hasattr(fn, "py_func") and not name.startswith("_")
-                 and fn.py_func.__module__ == module.__name__}
+    # the kernels the pipeline calls from Python, by module; not those a kernel of the module
+    # calls (its own or imported): numba binds them from the module's globals when it
+    # compiles, where a Python wrapper does not compile
+    modules = (grid, kring, pca, sphere, orient, jet, outliers, fused)
+    originals = {}
+    for module in modules:
+        kernels = {name: fn for name, fn in vars(module).items() if hasattr(fn, "py_func")}
+        called = {name for fn in kernels.values() for name in fn.py_func.__code__.co_names}
+        originals.update({(module, name): fn for name, fn in kernels.items()
+                          if not name.startswith("_") and name not in called})
 
     def timed(name, fn):
         def call(*args, **kwargs):

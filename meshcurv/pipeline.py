@@ -919,12 +919,12 @@ def _prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progre
         block_nv = _pca_field(v, face_normals, s, finite, r, plan, progress, weights, plain,
                               face_weight)
     field = block_nv
-    if (plan.normal_constraints and plan.refine and nv is not None and f is None
-            and plan.wide_field):
-        # a cloud's estimated normals (the spanning tree's, or a tile's) fitted again for the
-        # neighbors' normal rows over a ball of FIELD_RATIO times the radius, with the outlier
-        # weights (a stray point tilts the plane fits of all its neighbors), keeping their
-        # sides
+    if plan.normal_constraints and plan.refine and f is None and plan.wide_field:
+        # a cloud's estimated normals (the spanning tree's, a tile's, or plane fits turned
+        # towards the viewpoint or +z) fitted again for the neighbors' normal rows over a ball
+        # of FIELD_RATIO times the radius, with the outlier weights (a stray point tilts the
+        # plane fits of all its neighbors), keeping their sides: the orientation rule decides
+        # signs only
         wide = ball_search(v, finite, FIELD_RATIO * r)
         wide_weights = weight if weight is None or wide.rank is None else weight[wide.rank]
         field = _pca_field(v, nv, wide, finite, FIELD_RATIO * r, plan, progress, wide_weights)

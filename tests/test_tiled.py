@@ -133,10 +133,11 @@ def test_tile_task_memory_is_bounded_by_the_tile_not_the_cloud(client, default_r
         return max(s[key] for s in report.tile_stats.values())
 
     n_total = peak(big_report, "n_total")
-    # stated bound: the Python/numpy allocations of a tile task stay under 1.5 kB per point of
-    # tile + halo at ~30 neighbors (measured ~1.05 kB: neighbor lists, fits, results), with
-    # no term that grows with the cloud
-    assert peak(big_report, "peak_traced_bytes") <= 1500.0 * n_total
+    # stated bound: the Python/numpy allocations of a tile task stay under 2 kB per point of
+    # tile + halo at ~30 neighbors (measured ~1.55 kB: neighbor lists, among them those of
+    # the normal field's ball of sqrt 2 times the radius, fits, results), with no term that
+    # grows with the cloud
+    assert peak(big_report, "peak_traced_bytes") <= 2000.0 * n_total
     # the cloud grew 4x; the largest tile task grew only by its halo (interior tiles have one
     # on every side, the small run's corner tiles on two): per point of tile + halo, the same
     assert peak(big_report, "peak_traced_bytes") / n_total <= \

@@ -20,7 +20,7 @@ from .fit.extrapolate import BIAS_RATIO, extrapolate_to_zero
 from .neighbors import (MAX_BALL_FRACTION, BallGrid, KringWork, ball_counts, ball_grid,
                         ball_neighbors, edge_adjacency, kring_counts, kring_neighbors,
                         spatial_order)
-from .neighbors.csr import count_within, csr_rows
+from .neighbors.csr import ball_mean, count_within, csr_rows
 from .normals import face_normal_error, face_vertex_normals, orient, orient_along, \
     orient_like, orient_mst, orient_towards, pca_normals, sphere_normals
 from .result import CurvatureResult, Status
@@ -30,7 +30,8 @@ __all__ = ["run", "run_radii", "estimate_normals", "weight_blend", "clean_fracti
            "block_size", "blocks", "mst_normals", "outlier_scores", "retry_sparse", "BLOCK",
            "BLOCK_ENTRIES", "MAX_PAIRS", "NOISE_SCALE", "BIAS_NOISE_SCALE", "BIAS_TILT_SCALE",
            "GIVEN_SAMPLE",
-           "SPARSE_FACTORS", "MAX_BALL_FRACTION"]
+           "SPARSE_FACTORS", "MAX_BALL_FRACTION", "FIELD_RATIO", "FIELD_NOISE_RATIO",
+           "field_mix"]
 
 # Query points per call into the kernels: bounds the memory of the neighbor lists (about
 # 0.8 kB per query point at 100 neighbors) at no measurable cost in speed.
@@ -115,8 +116,15 @@ TREE_NEIGHBORS = 10
 # (mean |dH| over six, sigma_eps 0.1 / 0.2) 0.0160 / 0.0222 -> 0.0128 / 0.0163, clean ones
 # unchanged (0.0003). It loses where the ball is wide against the surface's bends, which the
 # wider plane fit takes up: the sparser CNC Goursat clouds, 10k points 0.0168 -> 0.0233, 25k
-# 0.0101 -> 0.0126 (sigma_eps 0.1). A ball of twice the radius: 0.0154 at sigma_eps 0.1.
+# 0.0101 -> 0.0126 (sigma_eps 0.1). A ball of twice the radius: 0.0154 at sigma_eps 0.1. Each
+# point now mixes the two fields by what separates them (:func:`field_mix`), which keeps the
+# narrow one where the surface bends within the ball (Goursat 10k: 0.0168 again).
 FIELD_RATIO = math.sqrt(2.0)
+# The mean squared disagreement (sin^2) of plane fits over the radius and over FIELD_RATIO
+# times it, per unit of that between plane fits of the two halves of a ball, where noise
+# alone separates them (:func:`field_mix`): measured on noisy planes (40000 points, random and
+# regular samplings, noise 0.2-9 % of the radius): 0.29-0.31 random, 0.35-0.36 regular.
+FIELD_NOISE_RATIO = 1.0 / 3.0
 
 
 class Search(NamedTuple):
@@ -928,6 +936,12 @@ def _prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progre
         wide = ball_search(v, finite, FIELD_RATIO * r)
         wide_weights = weight if weight is None or wide.rank is None else weight[wide.rank]
         field = _pca_field(v, nv, wide, finite, FIELD_RATIO * r, plan, progress, wide_weights)
+        narrow = block_nv
+        if nv is not None and weights is not None and np.any(weights < 1.0):
+            # the spanning tree's (or a tile's) plane fits are unweighted: fitted again with
+            # the outlier weights where a neighborhood holds a down-weighted point
+            narrow = _pca_field(v, nv, s, finite, r, plan, progress, weights, nv.copy())
+        field = _mixed_field(v, narrow, field, r, s, finite, block, weights)
     elif (plan.normal_constraints and weights is not None and plan.refine
             and nv is not None and np.any(weights < 1.0)):
         # a mesh's estimated normals made before the outlier weights fitted again with them
@@ -936,6 +950,73 @@ def _prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progre
         field = _pca_field(v, nv, s, finite, r, plan, progress, weights)
     return _Scale(r, s, score, weights, nv, face_normals, note, block_nv, given_a2,
                   _normal_field(field, s, plan), face_weight)
+
+
+def field_mix(disagreement, split):
+    """Weight (n,) in [0, 1] of each point's wide plane-fit normal (over FIELD_RATIO times the
+    radius) against its narrow one (over the radius) in the normal-aware fits' field.
+
+    ``disagreement``: the mean over the point's ball of ``sin^2`` of the angle between the
+    narrow and the wide normal; ``split``: the same mean of ``sin^2`` between plane fits of
+    the two halves of each ball, which differ by the narrow fit's noise alone (position noise
+    and random sampling), whatever the shape. Where noise alone separates the narrow and wide
+    fits, ``disagreement`` is ``E = FIELD_NOISE_RATIO * split``; what it holds beyond E is the
+    fits' bias (the curvature's variation across a ball, an anisotropic sampling), which
+    grows like the squared radius: b2 = disagreement - E is the narrow fit's squared bias, four
+    times it the wide fit's. The mix of least expected squared error of the two correlated
+    estimates is then ``(E - b2) / (E + b2) = 2 E / disagreement - 1``: 1 (wide) where the two
+    differ as noise makes them, 0 (narrow) where they differ twice as much. 1 where either is
+    NaN (the wide fit alone, as before the mix)."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mix = np.clip(2.0 * FIELD_NOISE_RATIO * split / disagreement - 1.0, 0.0, 1.0)
+    return np.where(np.isfinite(mix), mix, 1.0)
+
+
+def _split_disagreement(search, xb, indptr, indices, radius, point_weights=None):
+    """``sin^2`` (b,) of the angle between plane fits (:func:`pca_normals`, with
+    ``point_weights`` per row of ``search.points``) of the two halves of each list (alternate
+    entries; the point itself in both): what the fit's noise alone makes of it."""
+    counts = np.diff(indptr)
+    owner = np.repeat(np.arange(len(xb)), counts)
+    even = (np.arange(len(indices)) - np.repeat(indptr[:-1], counts)) % 2 == 0
+    halves = []
+    for part in (even, ~even):
+        ptr = np.concatenate([[0], np.cumsum(np.bincount(owner[part], minlength=len(xb)))])
+        halves.append(pca_normals(search.points, xb, ptr.astype(indptr.dtype), indices[part],
+                                  radius, point_weights))
+    cos = np.einsum("ij,ij->i", *halves)
+    return np.maximum(0.0, 1.0 - cos * cos)
+
+
+def _mixed_field(v, narrow, wide, radius, search, finite, block, point_weights=None):
+    """The normal field (n, 3) of the normal-aware fits: ``narrow + mix (wide - narrow)``,
+    normalised, with ``wide`` (turned to ``narrow``'s side) the plane fits over FIELD_RATIO
+    times ``radius`` and ``mix`` of :func:`field_mix` from the ball of ``radius`` (``search``'s
+    lists, ``point_weights`` per row of its points weighting the split fits); ``wide`` where
+    ``narrow`` is NaN."""
+    n = len(v)
+    rows = np.arange(n) if finite is None else finite
+    with np.errstate(invalid="ignore"):
+        cos = np.einsum("ij,ij->i", narrow, wide)
+    values = np.full((n, 2), np.nan)
+    values[:, 0] = np.maximum(0.0, 1.0 - cos * cos)
+    for pos in blocks(rows, False, "", block):
+        indptr, indices = search.neighbors(pos)
+        values[pos, 1] = _split_disagreement(search, v[pos], indptr, indices, radius,
+                                             point_weights)
+    means = np.full((n, 2), np.nan)
+    by_row = values if search.rank is None else values[search.rank]
+    for pos in blocks(rows, False, "", block):
+        indptr, indices = search.neighbors(pos)
+        part = np.empty((len(pos), 2))
+        ball_mean(search.points, v[pos], indptr, indices, radius * radius, by_row, part)
+        means[pos] = part
+    mix = field_mix(means[:, 0], means[:, 1])
+    turned = np.where((cos < 0)[:, None], -wide, wide)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mixed = narrow + mix[:, None] * (turned - narrow)
+        mixed /= np.linalg.norm(mixed, axis=1, keepdims=True)
+    return np.where(np.isfinite(mixed).all(axis=1)[:, None], mixed, wide)
 
 
 def _needs_support(out, plan):

@@ -11,7 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import Delaunay
 
-__all__ = ["Surface", "paraboloid", "monkey_saddle", "sphere", "ellipsoid", "cylinder", "torus",
+__all__ = ["Surface", "paraboloid", "monkey_saddle", "scan_terrain", "sphere", "ellipsoid",
+           "cylinder", "torus",
            "torus_at", "goursat_function", "goursat_at", "implicit_curvature",
            "project_to_implicit", "add_normal_noise", "orient_faces"]
 
@@ -146,6 +147,35 @@ def monkey_saddle(sampling="regular", extent=0.5, spacing=0.01, n=10000, seed=0)
     x, y, faces, border = _xy_samples(extent, sampling, spacing, n, seed)
     return _monge("monkey_saddle", x, y, x ** 3 - 3 * x * y * y, 3 * x * x - 3 * y * y,
                   -6 * x * y, 6 * x, -6 * y, -6 * x, 1.0, faces, border)
+
+
+def scan_terrain(spacing=(0.05, 0.25), jitter=0.0, wavelength=4 * np.pi, amplitude=0.1,
+                 extent=10.0, seed=0):
+    """Terrain z = 0.03 x^2 - 0.02 y^2 + amplitude sin(2 pi x / wavelength) on
+    [-extent, extent]^2, sampled as an airborne scanner sweeps it: a point every
+    ``spacing[0]`` along x on lines ``spacing[1]`` apart in y, each coordinate moved by
+    Gaussian ``jitter`` times its spacing. Upward normals (convex positive under them);
+    Delaunay faces of the (x, y) samples.
+
+    Examples
+    --------
+    >>> s = scan_terrain((1.0, 2.0), extent=2.0)
+    >>> s.vertices.shape, bool(np.all(s.normals[:, 2] > 0))
+    ((15, 3), True)
+    """
+    rng = np.random.default_rng(seed)
+    xs = np.arange(-extent, extent + 1e-9 * spacing[0], spacing[0])
+    ys = np.arange(-extent, extent + 1e-9 * spacing[1], spacing[1])
+    x, y = (a.ravel() for a in np.meshgrid(xs, ys, indexing="ij"))
+    x = x + rng.normal(scale=jitter * spacing[0], size=x.shape)
+    y = y + rng.normal(scale=jitter * spacing[1], size=y.shape)
+    w = 2 * np.pi / wavelength
+    z0 = np.zeros_like(x)
+    faces = Delaunay(np.column_stack([x, y])).simplices.astype(np.int64)
+    border = extent - np.maximum(np.abs(x), np.abs(y))
+    return _monge("terrain", x, y, 0.03 * x * x - 0.02 * y * y + amplitude * np.sin(w * x),
+                  0.06 * x + amplitude * w * np.cos(w * x), -0.04 * y,
+                  0.06 - amplitude * w * w * np.sin(w * x), z0, -0.04 + z0, 1.0, faces, border)
 
 
 def sphere(radius=1.0, subdivisions=5, sampling="regular", n=10000, seed=0):

@@ -497,7 +497,7 @@ def _reindex(faces, used):
 # Accuracy cases (--accuracy-cases): one group at a time, each against exact curvature
 # ---------------------------------------------------------------------------------------------
 
-ACCURACY_GROUPS = ("surfaces", "cnc", "density", "icosahedra", "spikes")
+ACCURACY_GROUPS = ("surfaces", "cnc", "density", "icosahedra", "spikes", "terrain")
 MESHLAB_NAMES = tuple(MESHLAB_METHODS)
 
 # CNC reference: mean |H - H_true| over the six clouds, the authors' code (Avg-Hexagram,
@@ -510,7 +510,7 @@ CNC_FILES = ("goursat_010000", "goursat_025000", "goursat_050000",
              "torus_010000", "torus_025000", "torus_050000")
 
 # Seeds of the generated noise, spikes and samplings (fixed: reruns give the same points).
-SEED_CNC, SEED_DENSITY, SEED_SPIKES = 2023, 25, 13
+SEED_CNC, SEED_DENSITY, SEED_SPIKES, SEED_TERRAIN = 2023, 25, 13, 7
 
 
 def find_cnc_dir():
@@ -847,8 +847,42 @@ def group_spikes(methods, size, switches, timeout, **_):
     return rows
 
 
+def group_terrain(methods, size, switches, timeout, **_):
+    """Airborne-scan-like clouds (:func:`meshcurv.surfaces.scan_terrain`, no faces, no
+    normals): a gentle and a bumpy terrain, three scan patterns, Gaussian height noise; meshcurv
+    oriented towards +z (LAS input's default) at its default radius; errors over the points at
+    least two radii from the border."""
+    from meshcurv.surfaces import scan_terrain
+
+    if "meshcurv" not in methods:
+        return []
+    extent = 3.0 if size == "smallest" else 10.0
+    patterns = (((0.1, 0.1), 0.0),) if size == "smallest" else \
+        (((0.1, 0.1), 0.0), ((0.05, 0.25), 0.1), ((0.03, 0.4), 0.05))
+    noises = (0.02,) if size == "smallest" else (0.005, 0.02, 0.05)
+    rows = []
+    for label, wavelength in (("gentle", 4 * np.pi), ("bumpy", 3.0)):
+        for spacing, jitter in patterns:
+            s = scan_terrain(spacing, jitter, wavelength=wavelength, extent=extent,
+                             seed=SEED_TERRAIN)
+            for noise in noises:
+                v = s.vertices.copy()
+                v[:, 2] += np.random.default_rng(SEED_TERRAIN + 1).normal(scale=noise,
+                                                                          size=len(v))
+                r = _run("meshcurv", v, None, None, {**switches, "orientation": "+z"}, timeout)
+                inner = s.border_distance >= 2 * r["radius"]
+                case = (f"{label} terrain, scan {spacing[0]:g} x {spacing[1]:g}, jitter "
+                        f"{jitter:g}, {len(v)} points, height noise {noise:g}")
+                rows.append(dict(group="terrain", case=case, method="meshcurv, +z",
+                                 radius=r["radius"], seconds=r["seconds"], status=r["status"],
+                                 **_curvature_row(r["k1"], r["k2"], s, inner)))
+                print(f"terrain {case}: mean |dk| {rows[-1]['mean_dk']:.4g}", flush=True)
+    return rows
+
+
 GROUP_RUNNERS = {"surfaces": group_surfaces, "cnc": group_cnc, "density": group_density,
-                 "icosahedra": group_icosahedra, "spikes": group_spikes}
+                 "icosahedra": group_icosahedra, "spikes": group_spikes,
+                 "terrain": group_terrain}
 
 
 def _git_commit():
@@ -951,6 +985,14 @@ GROUP_TEXT = {
                    "radius 1, k = 1); meshcurv at its default radius with the faces and on the "
                    "points alone; SDQF and APSS at meshcurv's default radius. A row is valid "
                    "where the method gave a finite estimate."),
+    "terrain": ("Airborne-scan-like terrains",
+                "z = 0.03 x^2 - 0.02 y^2 + 0.1 sin(2 pi x / wavelength) on [-10, 10]^2, "
+                "gentle (wavelength 4 pi, ~19 default radii) and bumpy (wavelength 3, ~4.5 "
+                "radii), sampled on scan lines (a point every 0.1 on lines 0.1 apart; 0.05 on "
+                "lines 0.25 apart, jittered by 0.1 of the spacings; 0.03 on lines 0.4 apart, "
+                "jittered by 0.05), Gaussian height noise 0.005 / 0.02 / 0.05 (absolute; "
+                "fixed seeds); no faces, no normals, meshcurv oriented towards +z at its "
+                "default radius. Errors over the points at least two radii from the border."),
     "spikes": ("Sphere with scanner spikes",
                "Icosphere of 10242 vertices (radius 1), Gaussian noise of 0.05 % of the "
                "diagonal along the normal, 2 % of the vertices pushed out or in along the "

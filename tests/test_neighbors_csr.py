@@ -66,3 +66,26 @@ def test_count_within_counts_the_entries_inside_the_ball_as_numpy_does():
         np.testing.assert_array_equal(csr.count_within(points, centres, indptr, indices, r2max),
                                       expected)
     assert 0 < csr.count_within(points, centres, indptr, indices, 0.3).sum() < len(indices)
+
+
+def test_ball_mean_averages_the_entries_inside_the_ball_as_numpy_does():
+    """The kernel against its numpy specification: the mean of each column over the entries
+    :func:`count_within` counts, NaN for a list with none of them."""
+    rng, indptr, indices = _random_lists(4, longest=40, n=300)
+    points = rng.uniform(-1.0, 1.0, (300, 3))
+    values = rng.normal(size=(300, 2))
+    centres = points[rng.integers(0, 300, len(indptr) - 1)]
+    owner = np.repeat(np.arange(len(centres)), np.diff(indptr))
+    d2 = np.sum((points[indices] - centres[owner]) ** 2, axis=1)
+    for r2max in (0.0, 0.3, 12.0):
+        inside = (d2 > 0.0) & (d2 <= r2max)
+        count = np.bincount(owner[inside], minlength=len(centres))
+        expected = np.column_stack([np.bincount(owner[inside], values[indices[inside], a],
+                                                minlength=len(centres)) for a in range(2)]
+                                   ).astype(np.float64)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            expected /= count[:, None]
+        mean = np.empty((len(centres), 2))
+        csr.ball_mean(points, centres, indptr, indices, r2max, values, mean)
+        np.testing.assert_allclose(mean, expected, rtol=1e-12, atol=1e-15)
+        assert np.isnan(mean[count == 0]).all() and np.isfinite(mean[count > 0]).all()

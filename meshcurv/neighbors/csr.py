@@ -103,3 +103,29 @@ def count_within(points, centres, indptr, indices, r2max):
                 c += 1
         out[i] = c
     return out
+
+
+
+@njit(parallel=True, cache=True)
+def ball_mean(points, centres, indptr, indices, r2max, values, mean):
+    """Means of ``values`` ((n, c), per row of ``points``) over the entries of each list within
+    a ball, as :func:`count_within` counts them, into ``mean`` ((m, c); NaN where the ball
+    holds none)."""
+    m = centres.shape[0]
+    c = values.shape[1]
+    for i in prange(m):
+        k = 0
+        for a in range(c):
+            mean[i, a] = 0.0
+        for e in range(indptr[i], indptr[i + 1]):
+            j = indices[e]
+            dx = points[j, 0] - centres[i, 0]
+            dy = points[j, 1] - centres[i, 1]
+            dz = points[j, 2] - centres[i, 2]
+            d2 = dx * dx + dy * dy + dz * dz
+            if d2 > 0.0 and d2 <= r2max:
+                k += 1
+                for a in range(c):
+                    mean[i, a] += values[j, a]
+        for a in range(c):
+            mean[i, a] = mean[i, a] / k if k > 0 else np.nan

@@ -162,13 +162,13 @@ def _curvature_stage(stages, names, tiles, flips, report):
 
 
 def _halo_reach(options):
-    """Radii the halo covers: 1, plus :data:`meshcurv.pipeline.FIELD_RATIO` with
-    normal-aware circle fits (a neighbor's estimated normal needs its own ball of that
-    radius), plus 1 with the outlier pass (the points of that ball are scored on their own
-    balls)."""
+    """Radii the halo covers: 1, plus 1 + :data:`meshcurv.pipeline.FIELD_RATIO` with
+    normal-aware circle fits (a neighbor's field normal mixes plane fits over balls of up to
+    that radius by means over its own ball, :func:`meshcurv.pipeline.field_mix`), plus 1 with
+    the outlier pass (the points of those balls are scored on their own balls)."""
     from ..pipeline import FIELD_RATIO
 
-    return (1 + FIELD_RATIO * (options.get("normal_constraints", "auto") != "off")
+    return (1 + (1 + FIELD_RATIO) * (options.get("normal_constraints", "auto") != "off")
             + bool(options.get("robust_points", True)))
 
 

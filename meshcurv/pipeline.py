@@ -23,6 +23,7 @@ from .neighbors import (MAX_BALL_FRACTION, BallGrid, KringWork, ball_counts, bal
 from .neighbors.csr import ball_mean, count_within, csr_rows
 from .normals import face_normal_error, face_vertex_normals, orient, orient_along, \
     orient_like, orient_mst, orient_towards, pca_normals, sphere_normals
+from .normals.pca import split_plane_disagreement
 from .result import CurvatureResult, Status
 
 __all__ = ["run", "run_radii", "estimate_normals", "weight_blend", "clean_fraction",
@@ -972,22 +973,6 @@ def field_mix(disagreement, split):
     return np.where(np.isfinite(mix), mix, 1.0)
 
 
-def _split_disagreement(search, xb, indptr, indices, radius, point_weights=None):
-    """``sin^2`` (b,) of the angle between plane fits (:func:`pca_normals`, with
-    ``point_weights`` per row of ``search.points``) of the two halves of each list (alternate
-    entries; the point itself in both): what the fit's noise alone makes of it."""
-    counts = np.diff(indptr)
-    owner = np.repeat(np.arange(len(xb)), counts)
-    even = (np.arange(len(indices)) - np.repeat(indptr[:-1], counts)) % 2 == 0
-    halves = []
-    for part in (even, ~even):
-        ptr = np.concatenate([[0], np.cumsum(np.bincount(owner[part], minlength=len(xb)))])
-        halves.append(pca_normals(search.points, xb, ptr.astype(indptr.dtype), indices[part],
-                                  radius, point_weights))
-    cos = np.einsum("ij,ij->i", *halves)
-    return np.maximum(0.0, 1.0 - cos * cos)
-
-
 def _mixed_field(v, narrow, wide, radius, search, finite, block, point_weights=None):
     """The normal field (n, 3) of the normal-aware fits: ``narrow + mix (wide - narrow)``,
     normalised, with ``wide`` (turned to ``narrow``'s side) the plane fits over FIELD_RATIO
@@ -1002,8 +987,8 @@ def _mixed_field(v, narrow, wide, radius, search, finite, block, point_weights=N
     values[:, 0] = np.maximum(0.0, 1.0 - cos * cos)
     for pos in blocks(rows, False, "", block):
         indptr, indices = search.neighbors(pos)
-        values[pos, 1] = _split_disagreement(search, v[pos], indptr, indices, radius,
-                                             point_weights)
+        values[pos, 1] = split_plane_disagreement(search.points, v[pos], indptr, indices,
+                                                  radius, point_weights)
     means = np.full((n, 2), np.nan)
     by_row = values if search.rank is None else values[search.rank]
     for pos in blocks(rows, False, "", block):

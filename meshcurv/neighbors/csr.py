@@ -84,6 +84,17 @@ def csr_rows(indptr, indices, rows):
     return sub_ptr, sub_idx
 
 
+@njit(cache=True)
+def _in_ball(points, j, centres, i, r2max):
+    """Whether ``points[j]`` lies within the ball of squared radius ``r2max`` about
+    ``centres[i]``, the centre itself (and points coincident with it) left out."""
+    dx = points[j, 0] - centres[i, 0]
+    dy = points[j, 1] - centres[i, 1]
+    dz = points[j, 2] - centres[i, 2]
+    d2 = dx * dx + dy * dy + dz * dz
+    return d2 > 0.0 and d2 <= r2max
+
+
 @njit(parallel=True, cache=True)
 def count_within(points, centres, indptr, indices, r2max):
     """Entries of each list within a ball: ``out[i]`` (int64) counts the j in list i with
@@ -94,16 +105,10 @@ def count_within(points, centres, indptr, indices, r2max):
     for i in prange(m):
         c = 0
         for e in range(indptr[i], indptr[i + 1]):
-            j = indices[e]
-            dx = points[j, 0] - centres[i, 0]
-            dy = points[j, 1] - centres[i, 1]
-            dz = points[j, 2] - centres[i, 2]
-            d2 = dx * dx + dy * dy + dz * dz
-            if d2 > 0.0 and d2 <= r2max:
+            if _in_ball(points, indices[e], centres, i, r2max):
                 c += 1
         out[i] = c
     return out
-
 
 
 @njit(parallel=True, cache=True)
@@ -119,11 +124,7 @@ def ball_mean(points, centres, indptr, indices, r2max, values, mean):
             mean[i, a] = 0.0
         for e in range(indptr[i], indptr[i + 1]):
             j = indices[e]
-            dx = points[j, 0] - centres[i, 0]
-            dy = points[j, 1] - centres[i, 1]
-            dz = points[j, 2] - centres[i, 2]
-            d2 = dx * dx + dy * dy + dz * dz
-            if d2 > 0.0 and d2 <= r2max:
+            if _in_ball(points, j, centres, i, r2max):
                 k += 1
                 for a in range(c):
                     mean[i, a] += values[j, a]

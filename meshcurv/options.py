@@ -295,8 +295,9 @@ class Plan(NamedTuple):
     ``robust_points``: the point-outlier pass and its weights.
     ``sparse_retry``: as the option. ``face_mix``: "pca" normals mixed with the face normals
     by their expected errors (``normal_estimation="auto"`` on a mesh). ``wide_field``: a
-    cloud's estimated normals for the normal-aware fits from plane fits over a ball
-    :data:`meshcurv.pipeline.FIELD_RATIO` times the radius (off under ``radius="auto"``, whose
+    cloud's estimated normals for the normal-aware fits mixed, point by point, with plane fits
+    over a ball :data:`meshcurv.pipeline.FIELD_RATIO` times the radius
+    (:func:`meshcurv.pipeline.field_mix`; off under ``radius="auto"``, whose
     ladder widens the balls themselves where the noise asks for it: CNC clouds without
     normals at sigma_eps 0.1, mean |dH| 0.0095 with the field at each radius, 0.0119 with it
     wider).

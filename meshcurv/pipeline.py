@@ -23,7 +23,7 @@ from .neighbors import (MAX_BALL_FRACTION, BallGrid, KringWork, ball_counts, bal
 from .neighbors.csr import ball_mean, count_within, csr_rows
 from .normals import face_normal_error, face_vertex_normals, orient, orient_along, \
     orient_like, orient_mst, orient_towards, pca_normals, sphere_normals
-from .normals.pca import split_plane_disagreement
+from .normals.pca import coordinate_halves, split_plane_disagreement
 from .result import CurvatureResult, Status
 
 __all__ = ["run", "run_radii", "estimate_normals", "weight_blend", "clean_fraction",
@@ -985,10 +985,11 @@ def _mixed_field(v, narrow, wide, radius, search, finite, block, point_weights=N
         cos = np.einsum("ij,ij->i", narrow, wide)
     values = np.full((n, 2), np.nan)
     values[:, 0] = np.maximum(0.0, 1.0 - cos * cos)
+    half = coordinate_halves(search.points)
     for pos in blocks(rows, False, "", block):
         indptr, indices = search.neighbors(pos)
         values[pos, 1] = split_plane_disagreement(search.points, v[pos], indptr, indices,
-                                                  radius, point_weights)
+                                                  radius, half, point_weights)
     means = np.full((n, 2), np.nan)
     by_row = values if search.rank is None else values[search.rank]
     for pos in blocks(rows, False, "", block):

@@ -119,7 +119,7 @@ TREE_NEIGHBORS = 10
 # wider plane fit takes up: the sparser CNC Goursat clouds, 10k points 0.0168 -> 0.0233, 25k
 # 0.0101 -> 0.0126 (sigma_eps 0.1). A ball of twice the radius: 0.0154 at sigma_eps 0.1. Each
 # point now mixes the two fields by what separates them (:func:`field_mix`), which keeps the
-# narrow one where the surface bends within the ball (Goursat 10k: 0.0168 again).
+# narrow one where the surface bends within the ball (Goursat 10k: 0.0175).
 FIELD_RATIO = math.sqrt(2.0)
 # The mean squared disagreement (sin^2) of plane fits over the radius and over FIELD_RATIO
 # times it, per unit of that between plane fits of the two halves of a ball, where noise

@@ -23,7 +23,7 @@ from .neighbors import (MAX_BALL_FRACTION, BallGrid, KringWork, ball_counts, bal
 from .neighbors.csr import ball_mean, count_within, csr_rows
 from .normals import face_normal_error, face_vertex_normals, orient, orient_along, \
     orient_like, orient_mst, orient_towards, pca_normals, sphere_normals
-from .normals.pca import coordinate_halves, split_plane_disagreement
+from .normals.pca import split_plane_disagreement
 from .result import CurvatureResult, Status
 
 __all__ = ["run", "run_radii", "estimate_normals", "weight_blend", "clean_fraction",
@@ -119,7 +119,7 @@ TREE_NEIGHBORS = 10
 # wider plane fit takes up: the sparser CNC Goursat clouds, 10k points 0.0168 -> 0.0233, 25k
 # 0.0101 -> 0.0126 (sigma_eps 0.1). A ball of twice the radius: 0.0154 at sigma_eps 0.1. Each
 # point now mixes the two fields by what separates them (:func:`field_mix`), which keeps the
-# narrow one where the surface bends within the ball (Goursat 10k: 0.0175).
+# narrow one where the surface bends within the ball (Goursat 10k: 0.0168 again).
 FIELD_RATIO = math.sqrt(2.0)
 # The mean squared disagreement (sin^2) of plane fits over the radius and over FIELD_RATIO
 # times it, per unit of that between plane fits of the two halves of a ball, where noise
@@ -130,16 +130,19 @@ FIELD_NOISE_RATIO = 1.0 / 3.0
 
 class Search(NamedTuple):
     """Neighborhoods of one radius: ``neighbors(idx)`` the CSR lists of the points ``v[idx]``
-    (unsorted: the kernels do not depend on the order within a list), ``counts(idx)`` their
+    (unsorted: the kernels depend on the order within a list only for rounding, but for the
+    field mix's two halves of each list, :func:`_mixed_field`), ``counts(idx)`` their
     lengths (nothing stored), ``points`` the coordinates the lists index (the grid's copy in
     grid order, or ``v``) and ``rank`` their vertex indices (None when ``points`` is ``v``);
-    ``adjacency`` the mesh's edge graph of k-ring searches (None for balls)."""
+    ``adjacency`` the mesh's edge graph of k-ring searches (None for balls); ``radius`` the
+    radius it was made for (model units)."""
 
     neighbors: Callable
     counts: Callable
     points: np.ndarray
     rank: object
     adjacency: object = None
+    radius: float = None
 
 
 def _mix_normals(start, refined, beta):
@@ -346,7 +349,7 @@ def ball_search(v, finite, radius):
         return ball_counts(tree, v[idx], radius)
 
     return Search(neighbors, counts, tree.sorted_points if in_grid else v,
-                  tree.order if in_grid else None)
+                  tree.order if in_grid else None, None, radius)
 
 
 def kring_search(v, f, radius, adjacency=None):
@@ -361,7 +364,7 @@ def kring_search(v, f, radius, adjacency=None):
 
     def counts(idx):
         return kring_counts(v, adjacency, radius, idx, work)
-    return Search(neighbors, counts, v, None, adjacency)
+    return Search(neighbors, counts, v, None, adjacency, radius)
 
 
 def outlier_scores(v, radius, search, rows, progress, block=BLOCK):
@@ -942,7 +945,12 @@ def _prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progre
             # the spanning tree's (or a tile's) plane fits are unweighted: fitted again with
             # the outlier weights where a neighborhood holds a down-weighted point
             narrow = _pca_field(v, nv, s, finite, r, plan, progress, weights, nv.copy())
-        field = _mixed_field(v, narrow, field, r, s, finite, block, weights)
+        # the mix's halves follow the order of the lists: those of a ball of this radius (a
+        # list of radii shares the largest one's lists), as a call at this radius alone has
+        own = s if s.radius == r else ball_search(v, finite, r)
+        own_weights = weights if own is s or weight is None else (
+            weight if own.rank is None else weight[own.rank])
+        field = _mixed_field(v, narrow, field, r, own, finite, block, own_weights)
     elif (plan.normal_constraints and weights is not None and plan.refine
             and nv is not None and np.any(weights < 1.0)):
         # a mesh's estimated normals made before the outlier weights fitted again with them
@@ -978,18 +986,21 @@ def _mixed_field(v, narrow, wide, radius, search, finite, block, point_weights=N
     normalised, with ``wide`` (turned to ``narrow``'s side) the plane fits over FIELD_RATIO
     times ``radius`` and ``mix`` of :func:`field_mix` from the ball of ``radius`` (``search``'s
     lists, ``point_weights`` per row of its points weighting the split fits); ``wide`` where
-    ``narrow`` is NaN."""
+    ``narrow`` is NaN. The two halves of a ball are its list's alternate entries
+    (:func:`meshcurv.normals.pca.split_plane_disagreement`): the grid's order, which
+    interleaves a regular sampling (a random half of a grid is noisier than the grid, and made
+    the mix take the wide fits too often: icosphere-scaled ellipsoid cloud, 0.1 % noise, mean
+    |dk| 0.033 -> 0.038). The grid's lists are the same in a tile as in the whole cloud."""
     n = len(v)
     rows = np.arange(n) if finite is None else finite
     with np.errstate(invalid="ignore"):
         cos = np.einsum("ij,ij->i", narrow, wide)
     values = np.full((n, 2), np.nan)
     values[:, 0] = np.maximum(0.0, 1.0 - cos * cos)
-    half = coordinate_halves(search.points)
     for pos in blocks(rows, False, "", block):
         indptr, indices = search.neighbors(pos)
         values[pos, 1] = split_plane_disagreement(search.points, v[pos], indptr, indices,
-                                                  radius, half, point_weights)
+                                                  radius, point_weights)
     means = np.full((n, 2), np.nan)
     by_row = values if search.rank is None else values[search.rank]
     for pos in blocks(rows, False, "", block):

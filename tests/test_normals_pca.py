@@ -5,16 +5,16 @@ import numpy as np
 import pytest
 
 from meshcurv.neighbors import ball_grid, ball_neighbors
-from meshcurv.normals.pca import coordinate_halves, pca_normals, split_plane_disagreement
+from meshcurv.normals.pca import pca_normals, split_plane_disagreement
 
 
 def split_spec(points, query, indptr, indices, radius, weights=None):
-    """sin^2 between :func:`pca_normals` of the entries in each of the coordinate halves."""
+    """sin^2 between :func:`pca_normals` of the entries at even and at odd list positions."""
     counts = np.diff(indptr)
     owner = np.repeat(np.arange(len(query)), counts)
-    first = coordinate_halves(points)[indices] == 0
+    even = (np.arange(len(indices)) - np.repeat(indptr[:-1], counts)) % 2 == 0
     halves = []
-    for part in (first, ~first):
+    for part in (even, ~even):
         ptr = np.concatenate([[0], np.cumsum(np.bincount(owner[part], minlength=len(query)))])
         halves.append(pca_normals(points, query, ptr.astype(indptr.dtype), indices[part],
                                   radius, weights))
@@ -32,8 +32,7 @@ def test_split_plane_disagreement_equals_its_numpy_specification(weighted):
     # sparse balls too: some halves have fewer than 3 points (NaN)
     for radius in (0.03, 0.2):
         indptr, indices = ball_neighbors(ball_grid(points, radius), None, query, radius)
-        got = split_plane_disagreement(points, query, indptr, indices, radius,
-                                       coordinate_halves(points), weights)
+        got = split_plane_disagreement(points, query, indptr, indices, radius, weights)
         want = split_spec(points, query, indptr, indices, radius, weights)
         np.testing.assert_array_equal(np.isnan(got), np.isnan(want))
         # the same normals bit for bit; sin^2 = 1 - cos^2 carries cos's rounding (1e-16,
@@ -51,22 +50,8 @@ def test_split_halves_of_a_plane_agree_and_noise_separates_them():
     out = []
     for points in (flat, noisy):
         indptr, indices = ball_neighbors(ball_grid(points, radius), None, points, radius)
-        out.append(split_plane_disagreement(points, points, indptr, indices, radius,
-                                            coordinate_halves(points)))
+        out.append(split_plane_disagreement(points, points, indptr, indices, radius))
     assert np.nanmax(out[0]) < 1e-20
     # each half's tilt: noise 0.02 over ~60 points spread over a ball of radius 0.2, sin^2 of
     # about 2 x 2 x 8 sigma^2 / (N R^2) (two halves, two tangent components) ~ 0.01
     assert 0.002 < np.nanmean(out[1]) < 0.05
-
-
-def test_coordinate_halves_split_any_sampling_evenly_whatever_its_order():
-    rng = np.random.default_rng(7)
-    grids = [np.stack(np.meshgrid(*[np.arange(40.0)] * 2, [0.0]), -1).reshape(-1, 3),  # integers
-             np.stack(np.meshgrid(*[np.arange(40) * 0.1] * 2, [0.0]), -1).reshape(-1, 3),
-             rng.normal(size=(1600, 3)) * 1e6]
-    for points in grids:
-        half = coordinate_halves(points)
-        assert set(np.unique(half)) == {0, 1}
-        assert abs(half.mean() - 0.5) < 0.05
-        order = rng.permutation(len(points))
-        np.testing.assert_array_equal(coordinate_halves(points[order]), half[order])

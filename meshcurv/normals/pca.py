@@ -7,23 +7,20 @@ from numba import njit, prange
 
 from ..linalg import CHUNK, ball_offset, smallest_eigvec_jacobi3
 
-__all__ = ["pca_normals", "pca_normals_csr", "split_plane_disagreement", "coordinate_halves"]
+__all__ = ["pca_normals", "pca_normals_csr", "split_plane_disagreement"]
 
 @njit(cache=True)
-def _plane_normal(points, indices, lo, hi, x0, x1, x2, r2max, inv_r, point_weights, cov, ev,
-                  half=None, which=0):
+def _plane_normal(points, indices, lo, hi, stride, x0, x1, x2, r2max, inv_r, point_weights,
+                  cov, ev):
     """Unit normal of the least-squares plane through (x0, x1, x2) and the neighbors
-    ``indices[lo:hi]`` within the ball (``r2max`` squared radius, ``inv_r`` its inverse; see
-    :func:`pca_normals_csr`) into ``ev``; False where it has none (fewer than 3 points, a
-    covariance that is not finite). ``cov`` (3, 3) is scratch. With ``half`` (per row of
-    ``points``), only the neighbors whose entry there is ``which``."""
+    ``indices[lo:hi:stride]`` within the ball (``r2max`` squared radius, ``inv_r`` its inverse;
+    see :func:`pca_normals_csr`) into ``ev``; False where it has none (fewer than 3 points, a
+    covariance that is not finite). ``cov`` (3, 3) is scratch."""
     s0 = s1 = s2 = 0.0
     s00 = s01 = s02 = s11 = s12 = s22 = 0.0
     c = 1.0
     k = 1
-    for j in range(lo, hi):
-        if half is not None and half[indices[j]] != which:
-            continue
+    for j in range(lo, hi, stride):
         inside, a, b, d, _ = ball_offset(points, indices[j], x0, x1, x2, r2max, inv_r)
         if not inside:
             continue
@@ -83,7 +80,7 @@ def pca_normals_csr(points, query_points, indptr, indices, radius, point_weights
         cov = np.empty((3, 3))
         ev = np.empty(3)
         for q in range(ch * CHUNK, min(m, (ch + 1) * CHUNK)):
-            if _plane_normal(points, indices, indptr[q], indptr[q + 1], query_points[q, 0],
+            if _plane_normal(points, indices, indptr[q], indptr[q + 1], 1, query_points[q, 0],
                              query_points[q, 1], query_points[q, 2], r2max, inv_r,
                              point_weights, cov, ev):
                 out[q, 0] = ev[0]
@@ -93,13 +90,11 @@ def pca_normals_csr(points, query_points, indptr, indices, radius, point_weights
 
 
 @njit(parallel=True, cache=True)
-def split_plane_disagreement(points, query_points, indptr, indices, radius, half,
-                             point_weights=None):
+def split_plane_disagreement(points, query_points, indptr, indices, radius, point_weights=None):
     """``sin^2`` (m,) of the angle between the plane fits (:func:`pca_normals_csr`) of the two
-    halves of each list - its entries whose ``half`` (per row of ``points``, 0 or 1, e.g.
-    :func:`coordinate_halves`) is 0 and those where it is 1, the query point in both - NaN
-    where either half has none: how far the fit's noise alone (the positions', and a random
-    sampling's) moves a plane fit of half the points. Its numpy specification:
+    halves of each list - its entries at even and at odd positions, the query point in
+    both - NaN where either half has none: how far the fit's noise alone (the positions',
+    and a random sampling's) moves a plane fit of half the points. Its numpy specification:
     :func:`pca_normals_csr` of the two halves' lists."""
     m = query_points.shape[0]
     out = np.full(m, np.nan)
@@ -114,28 +109,16 @@ def split_plane_disagreement(points, query_points, indptr, indices, radius, half
             x1 = query_points[q, 1]
             x2 = query_points[q, 2]
             lo, hi = indptr[q], indptr[q + 1]
-            if not _plane_normal(points, indices, lo, hi, x0, x1, x2, r2max, inv_r,
-                                 point_weights, cov, ev, half, 0):
+            if not _plane_normal(points, indices, lo, hi, 2, x0, x1, x2, r2max, inv_r,
+                                 point_weights, cov, ev):
                 continue
             e0, e1, e2 = ev[0], ev[1], ev[2]
-            if not _plane_normal(points, indices, lo, hi, x0, x1, x2, r2max, inv_r,
-                                 point_weights, cov, ev, half, 1):
+            if not _plane_normal(points, indices, lo + 1, hi, 2, x0, x1, x2, r2max, inv_r,
+                                 point_weights, cov, ev):
                 continue
             cos = e0 * ev[0] + e1 * ev[1] + e2 * ev[2]
             out[q] = max(0.0, 1.0 - cos * cos)
     return out
-
-
-def coordinate_halves(points):
-    """0 or 1 (n,) int8 per point, from a hash of its coordinates' bits: a split of any
-    neighborhood into two halves of about equal size that depends on neither the order of the
-    points nor of the lists (the same in a tile as in the whole cloud), even on grids of round
-    coordinates."""
-    bits = np.ascontiguousarray(points, dtype=np.float64).view(np.uint64)
-    key = bits[:, 0] ^ (bits[:, 1] * np.uint64(0x9E3779B97F4A7C15)) ^ \
-        (bits[:, 2] * np.uint64(0xC2B2AE3D27D4EB4F))
-    key = key * np.uint64(0xD6E8FEB86659FD93)
-    return (key >> np.uint64(63)).astype(np.int8)
 
 
 def pca_normals(points, query_points, indptr, indices, radius, point_weights=None):

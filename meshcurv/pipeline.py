@@ -637,7 +637,7 @@ def _normal_field(nv, search, plan):
         return None
     with np.errstate(invalid="ignore", divide="ignore"):
         field = field / np.linalg.norm(field, axis=1, keepdims=True)
-    return field if search.rank is None else field[search.rank]
+    return _by_row(field, search)
 
 
 def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2=0.0,
@@ -917,7 +917,7 @@ def _prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progre
         faces = (None, None) if start is None else (start[1], start[3])
         score, tree, plain = _outlier_pass(v, f, r, s, rows, plan, progress, block, *faces)
         weight = outliers.outlier_weight(score)
-        weights = weight if s.rank is None else weight[s.rank]
+        weights = _by_row(weight, s)
     if start is None:
         # the spanning tree's normals unweighted (from the outlier pass's lists, or their own):
         # they are estimate_normals', which tiled runs share between tiles (the weighted local
@@ -931,31 +931,29 @@ def _prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progre
         block_nv = _pca_field(v, face_normals, s, finite, r, plan, progress, weights, plain,
                               face_weight)
     field = block_nv
+    # estimated normals made before the outlier weights (a mesh's, the spanning tree's, a
+    # tile's) are fitted again with them for the neighbors' normal rows, keeping their sides:
+    # a stray point tilts the plane fits of all its neighbors (the plane-fit field above has
+    # the weights already)
+    reweigh = (plan.normal_constraints and plan.refine and nv is not None
+               and weights is not None and np.any(weights < 1.0))
     if plan.normal_constraints and plan.refine and f is None and plan.wide_field:
         # a cloud's estimated normals (the spanning tree's, a tile's, or plane fits turned
         # towards the viewpoint or +z) fitted again for the neighbors' normal rows over a ball
-        # of FIELD_RATIO times the radius, with the outlier weights (a stray point tilts the
-        # plane fits of all its neighbors), keeping their sides: the orientation rule decides
-        # signs only
+        # of FIELD_RATIO times the radius, with the outlier weights, keeping their sides: the
+        # orientation rule decides signs only
         wide = ball_search(v, finite, FIELD_RATIO * r)
-        wide_weights = weight if weight is None or wide.rank is None else weight[wide.rank]
-        field = _pca_field(v, nv, wide, finite, FIELD_RATIO * r, plan, progress, wide_weights)
-        narrow = block_nv
-        if nv is not None and weights is not None and np.any(weights < 1.0):
-            # the spanning tree's (or a tile's) plane fits are unweighted: fitted again with
-            # the outlier weights where a neighborhood holds a down-weighted point
-            narrow = _pca_field(v, nv, s, finite, r, plan, progress, weights, nv.copy())
+        field = _pca_field(v, nv, wide, finite, FIELD_RATIO * r, plan, progress,
+                           _by_row(weight, wide))
+        # a cloud's are unweighted plane fits: fitted again only where a neighborhood holds a
+        # down-weighted point
+        narrow = _pca_field(v, nv, s, finite, r, plan, progress, weights, nv.copy()) \
+            if reweigh else block_nv
         # the mix's halves follow the order of the lists: those of a ball of this radius (a
         # list of radii shares the largest one's lists), as a call at this radius alone has
         own = s if s.radius == r else ball_search(v, finite, r)
-        own_weights = weights if own is s or weight is None else (
-            weight if own.rank is None else weight[own.rank])
-        field = _mixed_field(v, narrow, field, r, own, finite, block, own_weights)
-    elif (plan.normal_constraints and weights is not None and plan.refine
-            and nv is not None and np.any(weights < 1.0)):
-        # a mesh's estimated normals made before the outlier weights fitted again with them
-        # for the neighbors' normal rows, keeping their sides: a stray point tilts the plane
-        # fits of all its neighbors (the plane-fit field above has the weights already)
+        field = _mixed_field(v, narrow, field, r, own, finite, block, _by_row(weight, own))
+    elif reweigh:
         field = _pca_field(v, nv, s, finite, r, plan, progress, weights)
     return _Scale(r, s, score, weights, nv, face_normals, note, block_nv, given_a2,
                   _normal_field(field, s, plan), face_weight)
@@ -1014,6 +1012,11 @@ def _mixed_field(v, narrow, wide, radius, search, finite, block, point_weights=N
         mixed = narrow + mix[:, None] * (turned - narrow)
         mixed /= np.linalg.norm(mixed, axis=1, keepdims=True)
     return np.where(np.isfinite(mixed).all(axis=1)[:, None], mixed, wide)
+
+
+def _by_row(values, search):
+    """Per-vertex ``values`` (n, ...) in the order of ``search.points`` (None stays None)."""
+    return values if values is None or search.rank is None else values[search.rank]
 
 
 def _needs_support(out, plan):

@@ -9,6 +9,7 @@ from ..linalg import CHUNK, ball_offset, smallest_eigvec_jacobi3
 
 __all__ = ["pca_normals", "pca_normals_csr", "split_plane_disagreement"]
 
+
 @njit(cache=True)
 def _plane_normal(points, indices, lo, hi, stride, x0, x1, x2, r2max, inv_r, point_weights,
                   cov, ev):

@@ -386,29 +386,35 @@ def _score_block(score, v, radius, search, pos, indptr, indices):
 
 
 def _outlier_pass(v, f, radius, search, rows, plan, progress, block, face_normals,
-                  face_weight=None):
+                  face_weight=None, split=False):
     """The outlier scores of :func:`outlier_scores` and, from the same neighbor lists (one
     search for all), what else needs every point's neighborhood before the blocks and does
-    not depend on the scores: the spanning tree's normals (``plan.normals == "mst"``, when
-    ``rows`` are all the finite points) and the plane-fit field of :func:`_pca_field` without
-    the outlier weights (normal-aware fits with ``plan.normals == "pca"``), which
-    :func:`_pca_field` then fits again only where a neighborhood holds a down-weighted point.
+    not depend on the scores (when ``rows`` are all the finite points): the spanning tree's
+    normals (``plan.normals == "mst"``), the plane-fit field of :func:`_pca_field` without
+    the outlier weights (normal-aware fits with ``plan.normals == "pca"``) and, with
+    ``split``, the field mix's split-half disagreement without them
+    (:func:`_mixed_field`); those two are then fitted again only where a neighborhood holds a
+    down-weighted point.
 
-    Returns ``(score (n,), tree, plain)``: ``tree`` the ``(normals, note)`` of
-    :func:`mst_normals` or None, ``plain`` the (n, 3) unweighted field or None.
+    Returns ``(score (n,), tree, plain, halves)``: ``tree`` the ``(normals, note)`` of
+    :func:`mst_normals` or None, ``plain`` the (n, 3) unweighted field or None, ``halves``
+    the (n,) unweighted split disagreement or None.
     """
     n = len(v)
     whole = len(rows) == np.count_nonzero(np.isfinite(v).all(axis=1))
     tree = plan.normals == "mst" and f is None and whole
     field = plan.normal_constraints and plan.normals == "pca" and whole
-    if not (tree or field):
-        return outlier_scores(v, radius, search, rows, progress, block), None, None
+    split = split and whole
+    if not (tree or field or split):
+        return outlier_scores(v, radius, search, rows, progress, block), None, None, None
     score = np.full(n, np.nan)
-    nv = graph = plain = None
+    nv = graph = plain = halves = None
     if tree:
         nv, graph = _tree_arrays(n)
     if field:
         plain = np.full((n, 3), np.nan)
+    if split:
+        halves = np.full(n, np.nan)
     if search.rank is not None:
         rows = search.rank          # the grid's cell order (the finite points): cache-friendly
     elif tree:
@@ -422,8 +428,12 @@ def _outlier_pass(v, f, radius, search, rows, plan, progress, block, face_normal
         if field:
             plain[pos] = _block_normals(None, face_normals, pos, v[pos], indptr, indices,
                                         radius, search, plan, face_weight=face_weight)
+        if split:
+            halves[pos] = split_plane_disagreement(search.points, v[pos], indptr, indices,
+                                                   radius)
         del indptr, indices
-    return score, (orient_mst(v, nv, neighbors=graph, note=True) if tree else None), plain
+    tree = orient_mst(v, nv, neighbors=graph, note=True) if tree else None
+    return score, tree, plain, halves
 
 
 def _scored_rows(v, search, query, finite, block, plan):
@@ -541,9 +551,8 @@ def _pca_field(v, face_normals, search, finite, radius, plan, progress, point_we
     if search.rank is not None:
         rows = search.rank          # the grid's cell order: neighborhoods stay in cache
     if plain is not None:
-        light = np.flatnonzero(point_weights < 1.0)
-        near = _near_points(v, search.points[light], rows, radius)
-        if len(near) <= len(rows) // 2:
+        near = _refit_rows(v, search, rows, radius, point_weights)
+        if near is not None:
             rows, nv = near, plain
         else:
             plain = None
@@ -554,6 +563,15 @@ def _pca_field(v, face_normals, search, finite, radius, plan, progress, point_we
         nv[pos] = _block_normals(None, face_normals, pos, v[pos], indptr, indices, radius,
                                  search, plan, point_weights, face_weight)
     return nv
+
+
+def _refit_rows(v, search, rows, radius, point_weights):
+    """The vertices among ``rows`` whose ball of ``radius`` holds a point of weight below 1
+    (``point_weights`` per row of ``search.points``), where a fit without the weights must be
+    made again with them; None where that is more than half of ``rows`` (fit them all)."""
+    light = np.flatnonzero(point_weights < 1.0)
+    near = _near_points(v, search.points[light], rows, radius)
+    return near if len(near) <= len(rows) // 2 else None
 
 
 def _near_points(v, centres, rows, radius):
@@ -906,7 +924,10 @@ class _Scale(NamedTuple):
 
 def _prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progress):
     """The :class:`_Scale` of radius ``r`` over the search ``s``."""
-    score = weights = weight = tree = plain = None
+    score = weights = weight = tree = plain = halves = None
+    # a cloud's estimated normals get the wide field's mix (see below); the split halves of
+    # its balls come with the outlier pass's lists when they are of this radius
+    mixes = plan.normal_constraints and plan.refine and f is None and plan.wide_field
     # not from the lists: before the outlier pass, whose plane fits take the faces' sides
     start = None if plan.normals == "mst" else _start_normals(v, f, given_normals, r, s,
                                                               finite, plan, progress)
@@ -915,7 +936,8 @@ def _prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progre
         # the same lists give the spanning tree's or the unweighted plane-fit normals
         rows = _scored_rows(v, s, query, finite, block, plan)
         faces = (None, None) if start is None else (start[1], start[3])
-        score, tree, plain = _outlier_pass(v, f, r, s, rows, plan, progress, block, *faces)
+        score, tree, plain, halves = _outlier_pass(v, f, r, s, rows, plan, progress, block,
+                                                   *faces, split=mixes and s.radius == r)
         weight = outliers.outlier_weight(score)
         weights = _by_row(weight, s)
     if start is None:
@@ -937,7 +959,7 @@ def _prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progre
     # the weights already)
     reweigh = (plan.normal_constraints and plan.refine and nv is not None
                and weights is not None and np.any(weights < 1.0))
-    if plan.normal_constraints and plan.refine and f is None and plan.wide_field:
+    if mixes:
         # a cloud's estimated normals (the spanning tree's, a tile's, or plane fits turned
         # towards the viewpoint or +z) fitted again for the neighbors' normal rows over a ball
         # of FIELD_RATIO times the radius, with the outlier weights, keeping their sides: the
@@ -952,7 +974,8 @@ def _prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progre
         # the mix's halves follow the order of the lists: those of a ball of this radius (a
         # list of radii shares the largest one's lists), as a call at this radius alone has
         own = s if s.radius == r else ball_search(v, finite, r)
-        field = _mixed_field(v, narrow, field, r, own, finite, block, _by_row(weight, own))
+        field = _mixed_field(v, narrow, field, r, own, finite, block, _by_row(weight, own),
+                             halves)
     elif reweigh:
         field = _pca_field(v, nv, s, finite, r, plan, progress, weights)
     return _Scale(r, s, score, weights, nv, face_normals, note, block_nv, given_a2,
@@ -979,7 +1002,8 @@ def field_mix(disagreement, split):
     return np.where(np.isfinite(mix), mix, 1.0)
 
 
-def _mixed_field(v, narrow, wide, radius, search, finite, block, point_weights=None):
+def _mixed_field(v, narrow, wide, radius, search, finite, block, point_weights=None,
+                 halves=None):
     """The normal field (n, 3) of the normal-aware fits: ``narrow + mix (wide - narrow)``,
     normalised, with ``wide`` (turned to ``narrow``'s side) the plane fits over FIELD_RATIO
     times ``radius`` and ``mix`` of :func:`field_mix` from the ball of ``radius`` (``search``'s
@@ -988,14 +1012,24 @@ def _mixed_field(v, narrow, wide, radius, search, finite, block, point_weights=N
     (:func:`meshcurv.normals.pca.split_plane_disagreement`): the grid's order, which
     interleaves a regular sampling (a random half of a grid is noisier than the grid, and made
     the mix take the wide fits too often: icosphere-scaled ellipsoid cloud, 0.1 % noise, mean
-    |dk| 0.033 -> 0.038). The grid's lists are the same in a tile as in the whole cloud."""
+    |dk| 0.033 -> 0.038). The grid's lists are the same in a tile as in the whole cloud.
+    ``halves``: the split disagreement without ``point_weights`` (n,), if at hand (filled in
+    place): it is fitted again only near down-weighted points, as in :func:`_pca_field`."""
     n = len(v)
     rows = np.arange(n) if finite is None else finite
+    if search.rank is not None:
+        rows = search.rank          # the grid's cell order: neighborhoods stay in cache
     with np.errstate(invalid="ignore"):
         cos = np.einsum("ij,ij->i", narrow, wide)
     values = np.full((n, 2), np.nan)
     values[:, 0] = np.maximum(0.0, 1.0 - cos * cos)
-    for pos in blocks(rows, False, "", block):
+    split_rows = rows
+    if halves is not None:
+        near = _refit_rows(v, search, rows, radius, point_weights)
+        if near is not None:
+            split_rows = near
+            values[:, 1] = halves
+    for pos in blocks(split_rows, False, "", block):
         indptr, indices = search.neighbors(pos)
         values[pos, 1] = split_plane_disagreement(search.points, v[pos], indptr, indices,
                                                   radius, point_weights)

@@ -46,3 +46,4 @@ def test_field_mix_is_wide_at_the_noise_level_and_narrow_at_twice_it():
     disagreement = np.array([noise_only, 1.5 * noise_only, 2 * noise_only, 4 * noise_only,
                              1.0, np.nan])
     np.testing.assert_allclose(field_mix(disagreement, split), [1.0, 1 / 3, 0.0, 0.0, 1.0, 1.0])
+

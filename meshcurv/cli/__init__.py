@@ -148,7 +148,7 @@ def _add_annotate_parser(sub):
         "large LAS/LAZ clouds (tiled on Dask; input and output .las or .laz)")
     g.add_argument("--tile-size", type=_positive_float, default=None, metavar="S",
                    help="cut the cloud into S x S tiles (model units, in x and y) with a halo "
-                        "of one radius and estimate them as Dask tasks; the result is written "
+                        "of a few radii and estimate them as Dask tasks; the result is written "
                         "in input order (default with --dask-scheduler: about 10^6 points per "
                         "tile). Needs the dask and las extras")
     g.add_argument("--dask-scheduler", metavar="ADDRESS", default=None,

@@ -59,7 +59,7 @@ def _check_tiled_arguments(args, options):
                            "(annotate without them for several radii, or once per radius)", 2)
     if is_auto_radius(options.radius):
         raise CommandError("--radius auto is not available with --tile-size/--dask-scheduler "
-                           "(the tiles' halo covers one radius); give a radius", 2)
+                           "(the tiles' halo is made for one radius); give a radius", 2)
     if options.normals != "auto":
         raise CommandError("--normals: tiled runs use the file's normals when it has them and "
                            "estimate them otherwise (--normals auto)", 2)

@@ -1,9 +1,10 @@
 """Tiled curvature estimation on Dask for clouds larger than one process: spatial tiles with a halo.
 
 The cloud is cut into square tiles of side ``tile_size`` in x, y (columns, unbounded in z). A tile
-task gets the tile's own points plus every point within the halo (``>= radius``, which is also the
-PCA-normal radius) of the tile, in input order, and estimates curvature at its own points only
-(``principal_curvatures(..., query=own)``). The neighbor lists of the own points then hold the
+task gets the tile's own points plus every point within the halo of the tile (the radii that the
+balls, the normal field and the outlier scores of its own points reach:
+:func:`meshcurv.tiled.run._halo_reach`), in input order, and estimates curvature at its own
+points only (``principal_curvatures(..., query=own)``). The neighbor lists of the own points then hold the
 same points as in a whole-cloud run, so a tile's values are those of the untiled run with the
 same normals, bit for bit: the neighbor search bins points into cells counted from 0 in
 model units (``floor(x / cell)``), not from the corner of the points present, so a point exactly on

@@ -23,7 +23,7 @@ from .neighbors import (MAX_BALL_FRACTION, BallGrid, KringWork, ball_counts, bal
 from .neighbors.csr import ball_mean, count_within, csr_rows
 from .normals import face_normal_error, face_vertex_normals, orient, orient_along, \
     orient_like, orient_mst, orient_towards, pca_normals, sphere_normals
-from .normals.pca import split_plane_disagreement
+from .normals.pca import split_disagreement
 from .result import CurvatureResult, Status
 
 __all__ = ["run", "run_radii", "estimate_normals", "weight_blend", "clean_fraction",
@@ -108,24 +108,29 @@ TREE_NEIGHBORS = 10
 # Radius, as a multiple of the call's, of the plane fits that give a point cloud's estimated
 # normals to the normal-aware circle fits (a neighbor's normal row). Those rows count where
 # the positions are noisy (their weight is 1 - the noise blend), and there a plane fit's
-# normal tilts by the noise over ~sqrt(points) - half the variance in a ball of twice the
-# area - while its bias (the curvature's variation across the ball) is a second-order effect
-# for a plane fit centred on its point. Measured on clouds without normals at their default
-# radius, mean |dk| (random samplings, noise of 0.1 / 0.3 % of the diagonal along the
-# normal): sphere 0.032 / 0.083 -> 0.023 / 0.045, ellipsoid 0.030 / 0.060 -> 0.031 / 0.043,
-# torus 240 x 60 vertices as a cloud 0.015 / 0.040 -> 0.011 / 0.022; the CNC benchmark clouds
-# (mean |dH| over six, sigma_eps 0.1 / 0.2) 0.0160 / 0.0222 -> 0.0128 / 0.0163, clean ones
-# unchanged (0.0003). It loses where the ball is wide against the surface's bends, which the
-# wider plane fit takes up: the sparser CNC Goursat clouds, 10k points 0.0168 -> 0.0233, 25k
-# 0.0101 -> 0.0126 (sigma_eps 0.1). A ball of twice the radius: 0.0154 at sigma_eps 0.1. Each
-# point now mixes the two fields by what separates them (:func:`field_mix`), which keeps the
-# narrow one where the surface bends within the ball (Goursat 10k: 0.0168 again).
-FIELD_RATIO = math.sqrt(2.0)
+# normal tilts by the noise over ~sqrt(points), a sixteenth of the variance in a ball of twice
+# the radius, while its bias (the curvature's variation across the ball) is a second-order
+# effect for a plane fit centred on its point. Each point mixes the wide fit with the narrow
+# one (over the radius) by what separates them (:func:`field_mix`), which keeps the narrow
+# one where the surface bends within the ball. Measured on clouds without normals at their
+# default radius, mean |dk| / median |k|, the previous release (sqrt 2 radii, halves of a
+# ball compared by plane fits) -> now (random samplings of 20000 points unless named, noise
+# 0.1 / 0.3 / 1 % of the diagonal along the normal): sphere 0.026 / 0.048 / 0.103 -> 0.022 /
+# 0.031 / 0.051, monkey saddle 0.047 / 0.102 / 0.191 -> 0.034 / 0.060 / 0.092, ellipsoid
+# 0.028 / 0.045 / 0.081 -> 0.029 / 0.042 / 0.068, torus 120 x 30 vertices as a cloud 0.013 /
+# 0.014 / 0.023 -> 0.009 / 0.011 / 0.024; the CNC benchmark clouds (mean |dH| over six,
+# sigma_eps 0.1 / 0.2) 0.0117 / 0.0157 -> 0.0103 / 0.0136. Losses: torus 240 x 60 at 0.1 %
+# 0.0050 -> 0.0052, icosphere-scaled ellipsoid at 1 % 0.069 -> 0.072, CNC torus_010000 0.0071
+# -> 0.0077, a valley terrain of 24000 points with noise 0.03 (mean |dH|) 0.0281 -> 0.0333
+# (narrow fits alone 0.0321: the mix misjudges it). Clean clouds are unchanged: the field's
+# rows have no weight there.
+FIELD_RATIO = 2.0
 # The mean squared disagreement (sin^2) of plane fits over the radius and over FIELD_RATIO
-# times it, per unit of that between plane fits of the two halves of a ball, where noise
-# alone separates them (:func:`field_mix`): measured on noisy planes (40000 points, random and
-# regular samplings, noise 0.2-9 % of the radius): 0.29-0.31 random, 0.35-0.36 regular.
-FIELD_NOISE_RATIO = 1.0 / 3.0
+# times it, per unit of the split measure of the two halves of a ball, where noise alone
+# separates them (:func:`field_mix`, :func:`meshcurv.normals.pca.split_disagreement`):
+# measured on noisy planes (40000 points, noise 0.2-26 % of the radius): 0.39-0.42 random,
+# 0.45-0.46 hexagonal and 0.47-0.52 square grids.
+FIELD_NOISE_RATIO = 0.45
 
 
 class Search(NamedTuple):
@@ -429,8 +434,7 @@ def _outlier_pass(v, f, radius, search, rows, plan, progress, block, face_normal
             plain[pos] = _block_normals(None, face_normals, pos, v[pos], indptr, indices,
                                         radius, search, plan, face_weight=face_weight)
         if split:
-            halves[pos] = split_plane_disagreement(search.points, v[pos], indptr, indices,
-                                                   radius)
+            halves[pos] = split_disagreement(search.points, v[pos], indptr, indices, radius)
         del indptr, indices
     tree = orient_mst(v, nv, neighbors=graph, note=True) if tree else None
     return score, tree, plain, halves
@@ -987,18 +991,22 @@ def field_mix(disagreement, split):
     radius) against its narrow one (over the radius) in the normal-aware fits' field.
 
     ``disagreement``: the mean over the point's ball of ``sin^2`` of the angle between the
-    narrow and the wide normal; ``split``: the same mean of ``sin^2`` between plane fits of
-    the two halves of each ball, which differ by the narrow fit's noise alone (position noise
-    and random sampling), whatever the shape. Where noise alone separates the narrow and wide
-    fits, ``disagreement`` is ``E = FIELD_NOISE_RATIO * split``; what it holds beyond E is the
-    fits' bias (the curvature's variation across a ball, an anisotropic sampling), which
-    grows like the squared radius: b2 = disagreement - E is the narrow fit's squared bias, four
-    times it the wide fit's. The mix of least expected squared error of the two correlated
-    estimates is then ``(E - b2) / (E + b2) = 2 E / disagreement - 1``: 1 (wide) where the two
-    differ as noise makes them, 0 (narrow) where they differ twice as much. 1 where either is
-    NaN (the wide fit alone, as before the mix)."""
+    narrow and the wide normal; ``split``: the same mean of
+    :func:`meshcurv.normals.pca.split_disagreement`, how far noise alone (position noise and a
+    random sampling) moves a plane fit of half a ball, whatever the shape. Where noise alone
+    separates the narrow and wide fits, ``disagreement`` is ``E = FIELD_NOISE_RATIO *
+    split``; what it holds beyond E, ``b2 = disagreement - E``, is the fits' bias (the
+    curvature's variation across a ball, an anisotropic sampling), which grows like the
+    squared radius: the narrow fit's squared bias is ``b2 / (rho^2 - 1)^2``, rho =
+    FIELD_RATIO, the wide fit's rho^4 times it. The wide fit's noise is a part of the narrow
+    one's (nested least squares), so the mix of least expected squared error of the two is
+    ``(E - b2 / (rho^2 - 1)) / (E + b2)``: 1 (wide) where the two differ as noise makes them,
+    0 (narrow) where the bias reaches ``(rho^2 - 1) E``. 1 where either is NaN (the wide fit
+    alone)."""
     with np.errstate(invalid="ignore", divide="ignore"):
-        mix = np.clip(2.0 * FIELD_NOISE_RATIO * split / disagreement - 1.0, 0.0, 1.0)
+        noise = FIELD_NOISE_RATIO * split
+        bias = np.maximum(disagreement - noise, 0.0)
+        mix = np.clip((noise - bias / (FIELD_RATIO ** 2 - 1.0)) / (noise + bias), 0.0, 1.0)
     return np.where(np.isfinite(mix), mix, 1.0)
 
 
@@ -1007,12 +1015,12 @@ def _mixed_field(v, narrow, wide, radius, search, finite, block, point_weights=N
     """The normal field (n, 3) of the normal-aware fits: ``narrow + mix (wide - narrow)``,
     normalised, with ``wide`` (turned to ``narrow``'s side) the plane fits over FIELD_RATIO
     times ``radius`` and ``mix`` of :func:`field_mix` from the ball of ``radius`` (``search``'s
-    lists, ``point_weights`` per row of its points weighting the split fits); ``wide`` where
-    ``narrow`` is NaN. The two halves of a ball are its list's alternate entries
-    (:func:`meshcurv.normals.pca.split_plane_disagreement`): the grid's order, which
-    interleaves a regular sampling (a random half of a grid is noisier than the grid, and made
-    the mix take the wide fits too often: icosphere-scaled ellipsoid cloud, 0.1 % noise, mean
-    |dk| 0.033 -> 0.038). The grid's lists are the same in a tile as in the whole cloud.
+    lists; ``point_weights`` per row of its points weight the split fits and the means);
+    ``wide`` where ``narrow`` is NaN. The two halves of a ball are its list's alternate
+    entries (:func:`meshcurv.normals.pca.split_disagreement`): the grid's order, which
+    interleaves a regular sampling (a random half of a grid is noisier than the grid, and
+    made the mix take the wide fits too often: icosphere-scaled ellipsoid cloud, 0.1 % noise,
+    mean |dk| 0.033 -> 0.038). The grid's lists are the same in a tile as in the whole cloud.
     ``halves``: the split disagreement without ``point_weights`` (n,), if at hand (filled in
     place): it is fitted again only near down-weighted points, as in :func:`_pca_field`."""
     n = len(v)
@@ -1031,14 +1039,15 @@ def _mixed_field(v, narrow, wide, radius, search, finite, block, point_weights=N
             values[:, 1] = halves
     for pos in blocks(split_rows, False, "", block):
         indptr, indices = search.neighbors(pos)
-        values[pos, 1] = split_plane_disagreement(search.points, v[pos], indptr, indices,
-                                                  radius, point_weights)
+        values[pos, 1] = split_disagreement(search.points, v[pos], indptr, indices, radius,
+                                            point_weights)
     means = np.full((n, 2), np.nan)
     by_row = values if search.rank is None else values[search.rank]
     for pos in blocks(rows, False, "", block):
         indptr, indices = search.neighbors(pos)
         part = np.empty((len(pos), 2))
-        ball_mean(search.points, v[pos], indptr, indices, radius * radius, by_row, part)
+        ball_mean(search.points, v[pos], indptr, indices, radius * radius, by_row, part,
+                  point_weights)
         means[pos] = part
     mix = field_mix(means[:, 0], means[:, 1])
     turned = np.where((cos < 0)[:, None], -wide, wide)

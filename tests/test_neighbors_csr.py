@@ -70,22 +70,29 @@ def test_count_within_counts_the_entries_inside_the_ball_as_numpy_does():
 
 def test_ball_mean_averages_the_entries_inside_the_ball_as_numpy_does():
     """The kernel against its numpy specification: the mean of each column over the entries
-    :func:`count_within` counts, NaN for a list with none of them."""
+    :func:`count_within` counts, NaN for a list with none of them; with weights (some 0),
+    the weighted mean, NaN where the weights in the ball sum to 0."""
     rng, indptr, indices = _random_lists(4, longest=40, n=300)
     points = rng.uniform(-1.0, 1.0, (300, 3))
     values = rng.normal(size=(300, 2))
+    weights = np.where(rng.uniform(size=300) < 0.2, 0.0, rng.uniform(size=300))
     centres = points[rng.integers(0, 300, len(indptr) - 1)]
     owner = np.repeat(np.arange(len(centres)), np.diff(indptr))
     d2 = np.sum((points[indices] - centres[owner]) ** 2, axis=1)
     for r2max in (0.0, 0.3, 12.0):
         inside = (d2 > 0.0) & (d2 <= r2max)
-        count = np.bincount(owner[inside], minlength=len(centres))
-        expected = np.column_stack([np.bincount(owner[inside], values[indices[inside], a],
-                                                minlength=len(centres)) for a in range(2)]
-                                   ).astype(np.float64)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            expected /= count[:, None]
-        mean = np.empty((len(centres), 2))
-        csr.ball_mean(points, centres, indptr, indices, r2max, values, mean)
-        np.testing.assert_allclose(mean, expected, rtol=1e-12, atol=1e-15)
-        assert np.isnan(mean[count == 0]).all() and np.isfinite(mean[count > 0]).all()
+        for w in (None, weights):
+            wj = np.ones(len(indices)) if w is None else w[indices]
+            total = np.bincount(owner[inside], wj[inside], minlength=len(centres)).astype(float)
+            expected = np.column_stack([
+                np.bincount(owner[inside], wj[inside] * values[indices[inside], a],
+                            minlength=len(centres)) for a in range(2)]).astype(np.float64)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                expected /= total[:, None]
+            mean = np.empty((len(centres), 2))
+            csr.ball_mean(points, centres, indptr, indices, r2max, values, mean, w)
+            np.testing.assert_allclose(mean, expected, rtol=1e-12, atol=1e-15)
+            assert np.isnan(mean[total == 0]).all() and np.isfinite(mean[total > 0]).all()
+            if r2max == 0.3 and w is not None:
+                assert np.any((total == 0) & (np.bincount(owner[inside],
+                                                          minlength=len(centres)) > 0))

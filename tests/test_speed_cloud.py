@@ -59,7 +59,7 @@ def test_fused_pass_equals_separate_passes():
     separate = pipeline.outlier_scores(v, 0.3, search, finite, False)
     normals, note = pipeline.mst_normals(v, 0.3, search, False)
     indptr, indices = search.neighbors(finite)
-    split = pipeline.split_plane_disagreement(search.points, v, indptr, indices, 0.3)
+    split = pipeline.split_disagreement(search.points, v, indptr, indices, 0.3)
     assert np.array_equal(score, separate, equal_nan=True)
     assert np.array_equal(tree[0], normals, equal_nan=True) and tree[1] == note
     assert np.array_equal(halves, split, equal_nan=True)

@@ -112,21 +112,24 @@ def count_within(points, centres, indptr, indices, r2max):
 
 
 @njit(parallel=True, cache=True)
-def ball_mean(points, centres, indptr, indices, r2max, values, mean):
+def ball_mean(points, centres, indptr, indices, r2max, values, mean, weights=None):
     """Means of ``values`` ((n, c), per row of ``points``) over the entries of each list within
     a ball, as :func:`count_within` counts them, into ``mean`` ((m, c); NaN where the ball
-    holds none)."""
+    holds none). ``weights`` ((n,) >= 0, per row of ``points``, optional): weighted means
+    ``sum w values / sum w`` (NaN where the weights in the ball sum to 0); default 1."""
     m = centres.shape[0]
     c = values.shape[1]
     for i in prange(m):
-        k = 0
+        total = 0.0
         for a in range(c):
             mean[i, a] = 0.0
         for e in range(indptr[i], indptr[i + 1]):
             j = indices[e]
             if _in_ball(points, j, centres, i, r2max):
-                k += 1
-                for a in range(c):
-                    mean[i, a] += values[j, a]
+                w = 1.0 if weights is None else weights[j]
+                if w > 0.0:
+                    total += w
+                    for a in range(c):
+                        mean[i, a] += w * values[j, a]
         for a in range(c):
-            mean[i, a] = mean[i, a] / k if k > 0 else np.nan
+            mean[i, a] = mean[i, a] / total if total > 0.0 else np.nan

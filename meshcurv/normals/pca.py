@@ -11,6 +11,18 @@ __all__ = ["pca_normals", "pca_normals_csr", "split_disagreement"]
 
 
 @njit(cache=True)
+def _neighbor(points, indices, j, x0, x1, x2, r2max, inv_r, point_weights):
+    """``(w, a, b, d)``: the weight of the neighbor ``indices[j]`` (``point_weights``, default
+    1) and its offset from (x0, x1, x2) in units of the radius; w = 0 where it is outside the
+    ball, coincident with the point or weighted 0 (:func:`meshcurv.linalg.ball_offset`)."""
+    inside, a, b, d, _ = ball_offset(points, indices[j], x0, x1, x2, r2max, inv_r)
+    w = 0.0
+    if inside:
+        w = 1.0 if point_weights is None else max(point_weights[indices[j]], 0.0)
+    return w, a, b, d
+
+
+@njit(cache=True)
 def _plane_normal(points, indices, lo, hi, x0, x1, x2, r2max, inv_r, point_weights, cov, ev):
     """Unit normal of the least-squares plane through (x0, x1, x2) and the neighbors
     ``indices[lo:hi]`` within the ball (``r2max`` squared radius, ``inv_r`` its inverse;
@@ -22,11 +34,8 @@ def _plane_normal(points, indices, lo, hi, x0, x1, x2, r2max, inv_r, point_weigh
     c = 1.0
     k = 1
     for j in range(lo, hi):
-        inside, a, b, d, _ = ball_offset(points, indices[j], x0, x1, x2, r2max, inv_r)
-        if not inside:
-            continue
-        w = 1.0 if point_weights is None else point_weights[indices[j]]
-        if w <= 0.0:
+        w, a, b, d = _neighbor(points, indices, j, x0, x1, x2, r2max, inv_r, point_weights)
+        if w == 0.0:
             continue
         k += 1
         c += w
@@ -112,11 +121,8 @@ def _height_fit(points, indices, lo, hi, stride, x0, x1, x2, r2max, inv_r, point
     mat[2, 2] = 1.0
     k = 1
     for j in range(lo, hi, stride):
-        inside, qx, qy, qz, _ = ball_offset(points, indices[j], x0, x1, x2, r2max, inv_r)
-        if not inside:
-            continue
-        w = 1.0 if point_weights is None else point_weights[indices[j]]
-        if w <= 0.0:
+        w, qx, qy, qz = _neighbor(points, indices, j, x0, x1, x2, r2max, inv_r, point_weights)
+        if w == 0.0:
             continue
         k += 1
         u = qx * frame[0, 0] + qy * frame[0, 1] + qz * frame[0, 2]

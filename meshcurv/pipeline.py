@@ -1021,8 +1021,8 @@ def _mixed_field(v, narrow, wide, radius, search, finite, block, point_weights=N
     interleaves a regular sampling (a random half of a grid is noisier than the grid, and
     made the mix take the wide fits too often: icosphere-scaled ellipsoid cloud, 0.1 % noise,
     mean |dk| 0.033 -> 0.038). The grid's lists are the same in a tile as in the whole cloud.
-    ``halves``: the split disagreement without ``point_weights`` (n,), if at hand (filled in
-    place): it is fitted again only near down-weighted points, as in :func:`_pca_field`."""
+    ``halves``: the split disagreement without ``point_weights`` (n,), if at hand: it is
+    fitted again only near down-weighted points, as in :func:`_pca_field`."""
     n = len(v)
     rows = np.arange(n) if finite is None else finite
     if search.rank is not None:

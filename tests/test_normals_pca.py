@@ -122,7 +122,7 @@ def test_split_halves_of_a_clean_sphere_agree_where_plane_fits_of_them_tilt():
         ptr = np.concatenate([[0], np.cumsum(np.bincount(owner[part], minlength=len(points)))])
         planes.append(pca_normals(points, points, ptr, indices[part], radius))
     cos = np.einsum("ij,ij->i", *planes)
-    # measured: 3e-9 (in the plane fit's frame, tilted from the surface's own axis, the
+    # measured: 1e-8 (in the plane fit's frame, tilted from the surface's own axis, the
     # sphere's height is not quite a quadric), plane fits of the halves 2.2e-4
     assert np.nanmean(split) < 1e-7
     assert np.nanmean(1.0 - cos * cos) > 1e-4

@@ -155,7 +155,7 @@ def split_disagreement(points, query_points, indptr, indices, radius, point_weig
     quadric part is taken off its heights: where the surface bends, a plane fit of an uneven
     half (every other point of a regular sampling) tilts with the curvature, which is not
     noise (clean icosphere of 10242 vertices, radius 0.3: sin^2 2e-4 with plain plane fits of
-    the halves, 3e-9 with this). The factor is how much more a plane fit's normal (the
+    the halves, 1e-8 with this). The factor is how much more a plane fit's normal (the
     covariance's smallest eigenvector) tilts under noise than a height fit's: it grows as the
     noise's variance l1 approaches the ball's spread l2 (measured on noisy planes, noise 2-26
     % of the radius: the ratio of the plane fits' disagreement over the radius and twice it

@@ -102,6 +102,22 @@ def smallest_eigvec_jacobi3(a, out):
 
 
 @njit(cache=True)
+def normal_frame(n0, n1, n2, frame):
+    """Rows of ``frame`` (3, 3): a unit tangent t (e_x x n, or e_y x n where n is near e_x),
+    n x t, and the unit normal n = (n0, n1, n2): a right-handed frame about n."""
+    if abs(n0) < 0.9:
+        t0, t1, t2 = 0.0, -n2, n1
+    else:
+        t0, t1, t2 = n2, 0.0, -n0
+    s = 1.0 / math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+    frame[0, 0], frame[0, 1], frame[0, 2] = t0 * s, t1 * s, t2 * s
+    frame[1, 0] = n1 * frame[0, 2] - n2 * frame[0, 1]
+    frame[1, 1] = n2 * frame[0, 0] - n0 * frame[0, 2]
+    frame[1, 2] = n0 * frame[0, 1] - n1 * frame[0, 0]
+    frame[2, 0], frame[2, 1], frame[2, 2] = n0, n1, n2
+
+
+@njit(cache=True)
 def solve_sym(m, rhs, npar, sol):
     """Solve the small symmetric positive system m @ sol = rhs by Cholesky; False if singular."""
     # in place copy-free Cholesky on a (npar, npar) scratch held in m

@@ -13,7 +13,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from ..linalg import CHUNK, ball_offset, select_median, smallest_eigvec_jacobi3, solve_sym
+from ..linalg import (CHUNK, ball_offset, normal_frame, select_median,
+                      smallest_eigvec_jacobi3, solve_sym)
 from .constants import OUTLIER_ITERATIONS, OUTLIER_SCALE_FLOOR, OUTLIER_TRUSTED, TUKEY_C
 from .jet import _add_monomials
 
@@ -65,17 +66,7 @@ def _pca_frame(q, wr, k, frame, cov, ev):
     cov[2, 0] = cov[0, 2]
     cov[2, 1] = cov[1, 2]
     smallest_eigvec_jacobi3(cov, ev)
-    n0, n1, n2 = ev[0], ev[1], ev[2]
-    if abs(n0) < 0.9:
-        t0, t1, t2 = 0.0, -n2, n1
-    else:
-        t0, t1, t2 = n2, 0.0, -n0
-    s = 1.0 / math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
-    frame[0, 0], frame[0, 1], frame[0, 2] = t0 * s, t1 * s, t2 * s
-    frame[1, 0] = n1 * frame[0, 2] - n2 * frame[0, 1]
-    frame[1, 1] = n2 * frame[0, 0] - n0 * frame[0, 2]
-    frame[1, 2] = n0 * frame[0, 1] - n1 * frame[0, 0]
-    frame[2, 0], frame[2, 1], frame[2, 2] = n0, n1, n2
+    normal_frame(ev[0], ev[1], ev[2], frame)
 
 
 # Exponents (of u, of v) of the height model's terms: plane (first 3), quadric (first 6),

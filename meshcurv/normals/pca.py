@@ -5,7 +5,7 @@ Compiled kernel :func:`pca_normals_csr` and its wrapper :func:`pca_normals`.
 import numpy as np
 from numba import njit, prange
 
-from ..linalg import CHUNK, ball_offset, smallest_eigvec_jacobi3, solve_sym
+from ..linalg import CHUNK, ball_offset, normal_frame, smallest_eigvec_jacobi3, solve_sym
 
 __all__ = ["pca_normals", "pca_normals_csr", "split_disagreement"]
 
@@ -186,17 +186,7 @@ def split_disagreement(points, query_points, indptr, indices, radius, point_weig
                 continue
             l1 = min(cov[0, 0], cov[1, 1], cov[2, 2])
             l2 = max(min(cov[0, 0], cov[1, 1]), min(max(cov[0, 0], cov[1, 1]), cov[2, 2]))
-            # rows t1 = nrm x (e0 or e1), t2 = nrm x t1, nrm
-            if abs(nrm[0]) < 0.9:
-                t0, t1, t2 = 0.0, nrm[2], -nrm[1]
-            else:
-                t0, t1, t2 = -nrm[2], 0.0, nrm[0]
-            s = 1.0 / np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
-            frame[0, 0], frame[0, 1], frame[0, 2] = t0 * s, t1 * s, t2 * s
-            frame[1, 0] = nrm[1] * frame[0, 2] - nrm[2] * frame[0, 1]
-            frame[1, 1] = nrm[2] * frame[0, 0] - nrm[0] * frame[0, 2]
-            frame[1, 2] = nrm[0] * frame[0, 1] - nrm[1] * frame[0, 0]
-            frame[2, 0], frame[2, 1], frame[2, 2] = nrm[0], nrm[1], nrm[2]
+            normal_frame(nrm[0], nrm[1], nrm[2], frame)
             if not _height_fit(points, indices, lo, hi, 1, x0, x1, x2, r2max, inv_r,
                                point_weights, frame, _QUADRIC_TERMS, flat, phi, mat, rhs, sol):
                 continue

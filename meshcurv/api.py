@@ -6,7 +6,7 @@ power-of-two rescaling of extreme scales) and options; the work itself is
 
 import numpy as np
 
-from . import pipeline, scale as scale_select
+from . import pipeline, scale as scale_select, weld
 from .inputs import as_arrays
 from .neighbors import MAX_BALL_FRACTION, default_radius, power_of_two_scale
 from .options import Options, resolve_plan
@@ -172,7 +172,9 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
         Points, model units. Never reordered; NaN/inf rows give NaN results.
     faces : (m, 3) int, optional
         Triangles, counter-clockwise seen from outside. Enables the k-ring neighborhood and
-        face-based normal orientation.
+        face-based normal orientation. Vertices with exactly equal coordinates (a triangle
+        soup, a mesh split along texture seams) are joined for the neighborhoods and share
+        one estimate (:mod:`meshcurv.weld`); every copy keeps its row.
     normals : (n, 3) float, optional
         Outward normals, used as given (normalised). Default: estimated, see
         ``Options.normal_estimation``.
@@ -234,6 +236,19 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
                     **Options.merged(options, switches).as_dict())
     plan = resolve_plan(f is not None, given_normals is not None, **settings)
     query = _check_query(query, len(v))
+    welding = weld.coincident_vertices(v) if f is not None else None
+    if welding is None:
+        return _estimate(v, f, given_normals, radius, query, plan, progress)
+    # copies of one position (triangle soups, split seams): estimated once, on the mesh they
+    # make together, and each copy gets that row
+    rows, where = weld.welded_queries(query, welding)
+    vw, fw, nw = weld.welded_mesh(v, f, given_normals, welding)
+    return weld.expand_rows(_estimate(vw, fw, nw, radius, rows, plan, progress), where)
+
+
+def _estimate(v, f, given_normals, radius, query, plan, progress):
+    """The curvature at the vertex indices ``query`` for a radius, a list of radii or
+    "auto" (see :func:`principal_curvatures`), on inputs already checked."""
     if _is_radius_list(radius):
         return _run_radii(v, f, given_normals, _check_radii(radius), query, plan, progress)
     if isinstance(radius, str) and radius == "auto":

@@ -6,6 +6,7 @@ from collections import Counter
 
 import numpy as np
 
+from ..weld import coincident_vertices
 from .data import MeshData, MeshFileError
 
 __all__ = ["read_stl", "readers"]
@@ -61,12 +62,12 @@ def _is_number(token):
 
 def _merge_exact(vertices, faces):
     """Merge (n, 3) ``vertices`` with identical coordinates, keeping the order of first
-    appearance; returns the merged (k, 3) vertices and ``faces`` ((m, 3) int) renumbered."""
-    _, first, inverse = np.unique(vertices, axis=0, return_index=True, return_inverse=True)
-    order = np.argsort(first, kind="stable")
-    rank = np.empty_like(order)
-    rank[order] = np.arange(len(order))
-    return vertices[first[order]], rank[inverse.ravel()][faces]
+    appearance (:func:`meshcurv.weld.coincident_vertices`); returns the merged (k, 3)
+    vertices and ``faces`` ((m, 3) int) renumbered."""
+    welding = coincident_vertices(vertices)
+    if welding is None:
+        return vertices, faces
+    return vertices[welding.keep], welding.index[faces]
 
 
 def read_stl(path):

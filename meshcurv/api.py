@@ -174,7 +174,9 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
         Triangles, counter-clockwise seen from outside. Enables the k-ring neighborhood and
         face-based normal orientation. Vertices with exactly equal coordinates (a triangle
         soup, a mesh split along texture seams) are joined for the neighborhoods and share
-        one estimate (:mod:`meshcurv.weld`); every copy keeps its row.
+        one estimate (:mod:`meshcurv.weld`); every copy keeps its row. Faces wound against
+        their neighbours are taken turned (:mod:`meshcurv.normals.winding`; the result's
+        ``orientation`` says how many).
     normals : (n, 3) float, optional
         Outward normals, used as given (normalised). Default: estimated, see
         ``Options.normal_estimation``.

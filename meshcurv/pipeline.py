@@ -24,6 +24,7 @@ from .neighbors.csr import ball_mean, count_within, csr_rows
 from .normals import face_normal_error, face_vertex_normals, orient, orient_along, \
     orient_like, orient_mst, orient_towards, pca_normals, sphere_normals
 from .normals.pca import split_disagreement
+from .normals.winding import coherent_faces
 from .result import CurvatureResult, Status
 
 __all__ = ["run", "run_radii", "estimate_normals", "weight_blend", "clean_fraction",
@@ -509,16 +510,20 @@ def _start_normals(v, f, given, radius, search, finite, plan, progress, point_we
     (:func:`face_weights`), or None."""
     if plan.normals == "given":
         return given, None, "as given", None
-    face_normals = None
-    if f is not None:
-        with np.errstate(invalid="ignore"):       # NaN vertices give NaN normals
-            face_normals = face_vertex_normals(v, f)
     if plan.normals == "mst":
         normals, note = _spanning_tree_normals(v, radius, search, finite, progress,
                                                point_weights)
         return normals, None, note, None
+    face_normals = None
+    turned = 0
+    if f is not None:
+        f, turned = coherent_faces(v, f, search.adjacency)
+        with np.errstate(invalid="ignore"):       # NaN vertices give NaN normals
+            face_normals = face_vertex_normals(v, f)
     note = ("oriented like the faces" if face_normals is not None else
             "oriented towards +z" if plan.viewpoint is None else "oriented towards the viewpoint")
+    if turned:
+        note += f" ({turned} of {len(f)} faces turned to the winding of their neighbours)"
     weight = (face_weights(v, f, face_normals, search.adjacency)
               if plan.face_mix and face_normals is not None else None)
     return (face_normals if plan.normals == "faces" else None), face_normals, note, weight

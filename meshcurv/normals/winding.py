@@ -1,0 +1,135 @@
+"""Faces wound coherently: where a mesh's triangles are wound against their neighbours (two
+faces running through a shared edge in the same direction), the face normals - and with
+them the normals' orientation and every curvature's sign - flip from face to face.
+:func:`coherent_faces` turns such faces so that each connected piece is wound one way,
+outward where the piece is closed (positive enclosed volume), and as most of its area was
+wound where it is open; what MeshLab's "Re-Orient all faces coherently" and trimesh's
+``repair.fix_winding`` do before their curvature filters. Meshes wound coherently are not
+touched.
+"""
+
+import numpy as np
+from numba import njit
+
+from ..neighbors.kring import edge_adjacency
+
+__all__ = ["coherent_faces", "same_direction_edges"]
+
+
+@njit(cache=True)
+def same_direction_edges(faces, indptr, indices):
+    """Number of face edges that another face runs through in the same direction.
+
+    ``faces`` (m, 3) int64; ``indptr, indices`` the mesh's
+    :func:`meshcurv.neighbors.edge_adjacency` (rows sorted). Each directed edge a -> b of a
+    face is counted at b's place in a's row; a coherently wound (or non-manifold but
+    consistent) mesh gives 0. Degenerate edges (a == b) are skipped.
+    """
+    count = np.zeros(indices.shape[0], dtype=np.int32)
+    clashes = 0
+    for f in range(faces.shape[0]):
+        for c in range(3):
+            a = faces[f, c]
+            b = faces[f, (c + 1) % 3]
+            if a == b:
+                continue
+            lo = indptr[a]
+            hi = indptr[a + 1]
+            while lo < hi:                      # b's place in a's sorted row
+                mid = (lo + hi) // 2
+                if indices[mid] < b:
+                    lo = mid + 1
+                else:
+                    hi = mid
+            count[lo] += 1
+            if count[lo] > 1:
+                clashes += 1
+    return clashes
+
+
+@njit(cache=True)
+def _propagate_turns(indptr, indices, clash, n_faces):
+    """Breadth-first over the faces joined by manifold edges: ``turn[g]`` (0/1) such that
+    faces whose edge ``clash`` says they run the same way (1) end up opposite; returns
+    ``(turn, piece)``, the piece (connected component) of each face."""
+    turn = np.zeros(n_faces, dtype=np.int8)
+    piece = np.full(n_faces, -1, dtype=np.int64)
+    queue = np.empty(n_faces, dtype=np.int64)
+    n_pieces = 0
+    for start in range(n_faces):
+        if piece[start] >= 0:
+            continue
+        piece[start] = n_pieces
+        head = 0
+        tail = 1
+        queue[0] = start
+        while head < tail:
+            g = queue[head]
+            head += 1
+            for j in range(indptr[g], indptr[g + 1]):
+                h = indices[j]
+                if piece[h] < 0:
+                    piece[h] = n_pieces
+                    turn[h] = turn[g] ^ clash[j]
+                    queue[tail] = h
+                    tail += 1
+        n_pieces += 1
+    return turn, piece
+
+
+def coherent_faces(vertices, faces, adjacency=None):
+    """``(faces, n_turned)``: ``faces`` ((m, 3) int64) with the rows that were wound against
+    their neighbours reversed, and how many; ``faces`` itself and 0 where the mesh is wound
+    coherently.
+
+    Each connected piece (faces joined through edges two faces share) is wound like its first
+    face, then turned as a whole to face outward where it is closed (no edge with one face:
+    positive enclosed volume), else to keep the winding of most of its area. Edges of three
+    or more faces join nothing; a piece that cannot be wound coherently (a Moebius strip)
+    keeps the winding its spanning tree gives. ``adjacency``: the mesh's
+    :func:`meshcurv.neighbors.edge_adjacency`, if already made.
+    """
+    f = np.asarray(faces, dtype=np.int64)
+    v = np.asarray(vertices, dtype=np.float64)
+    if len(f) == 0:
+        return f, 0
+    indptr, indices = edge_adjacency(f, len(v)) if adjacency is None else adjacency
+    if same_direction_edges(f, indptr, indices) == 0:
+        return faces, 0
+    m = len(f)
+    a = f.ravel()
+    b = f[:, [1, 2, 0]].ravel()
+    owner = np.repeat(np.arange(m), 3)
+    proper = a != b
+    a, b, owner = a[proper], b[proper], owner[proper]
+    key = np.minimum(a, b) * len(v) + np.maximum(a, b)
+    order = np.argsort(key, kind="stable")
+    key, forward, owner = key[order], (a < b)[order], owner[order]
+    starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+    size = np.diff(np.r_[starts, len(key)])
+    pairs = starts[size == 2]
+    g, h = owner[pairs], owner[pairs + 1]
+    clash = (forward[pairs] == forward[pairs + 1]).astype(np.int8)
+    # the faces' graph through those edges, CSR
+    rows, cols = np.r_[g, h], np.r_[h, g]
+    by_row = np.argsort(rows, kind="stable")
+    graph_ptr = np.r_[0, np.cumsum(np.bincount(rows, minlength=m))]
+    turn, piece = _propagate_turns(graph_ptr, cols[by_row], np.r_[clash, clash][by_row], m)
+    # each piece as a whole: outward where closed, else as most of its area was wound
+    oriented = np.where(turn[:, None] == 1, f[:, ::-1], f)
+    with np.errstate(invalid="ignore", over="ignore"):      # NaN vertices: NaN, left out
+        p = v[oriented] - np.nanmean(v, axis=0)
+        cross = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+        volume = np.einsum("ij,ij->i", p[:, 0], cross)
+        area = np.linalg.norm(cross, axis=1)
+    n_pieces = int(piece.max()) + 1
+    open_piece = np.zeros(n_pieces, dtype=bool)
+    open_piece[piece[owner[starts[size == 1]]]] = True
+    volume_sum = np.bincount(piece, weights=np.nan_to_num(volume), minlength=n_pieces)
+    turned_area = np.bincount(piece, weights=np.nan_to_num(area) * turn, minlength=n_pieces)
+    kept_area = np.bincount(piece, weights=np.nan_to_num(area) * (1 - turn), minlength=n_pieces)
+    flip_piece = np.where(open_piece, turned_area > kept_area, volume_sum < 0)
+    turn = turn.astype(bool) ^ flip_piece[piece]
+    out = f.copy()
+    out[turn] = f[turn][:, ::-1]
+    return out, int(turn.sum())

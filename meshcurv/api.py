@@ -168,15 +168,15 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
 
     Parameters
     ----------
-    vertices : (n, 3) float or trimesh.Trimesh
+    vertices : (n, 3) float, trimesh.Trimesh or trimesh.PointCloud
         Points, model units. Never reordered; NaN/inf rows give NaN results.
     faces : (m, 3) int, optional
         Triangles, counter-clockwise seen from outside. Enables the k-ring neighborhood and
         face-based normal orientation. Vertices with exactly equal coordinates (a triangle
         soup, a mesh split along texture seams) are joined for the neighborhoods and share
         one estimate (:mod:`meshcurv.weld`); every copy keeps its row. Faces wound against
-        their neighbours are taken turned (:mod:`meshcurv.normals.winding`; the result's
-        ``orientation`` says how many).
+        their neighbours, and closed pieces wound inward, are taken turned
+        (:mod:`meshcurv.normals.winding`; the result's ``orientation`` says how many).
     normals : (n, 3) float, optional
         Outward normals, used as given (normalised). Default: estimated, see
         ``Options.normal_estimation``.

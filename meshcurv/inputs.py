@@ -9,12 +9,19 @@ def as_arrays(vertices, faces=None, normals=None):
     """``(v, f, nv)``: the estimator's inputs validated and converted.
 
     ``v`` (n, 3) float64 contiguous; ``f`` (m, 3) int64 with indices in 0..n-1, or None; ``nv``
-    (n, 3) float64, or None. A trimesh.Trimesh supplies vertices and faces. Raises ValueError
-    (one line) for wrong shapes, non-integer faces and face indices out of range.
+    (n, 3) float64, or None. A trimesh.Trimesh supplies vertices and faces, a
+    trimesh.PointCloud its points (a trimesh.Scene is refused: it is no one surface). Raises
+    ValueError (one line) for wrong shapes, non-integer faces and face indices out of range.
     """
+    if hasattr(vertices, "geometry") and hasattr(vertices, "graph"):
+        raise ValueError(f"a trimesh.Scene holds {len(vertices.geometry)} geometries, not one "
+                         f"surface: pass scene.to_geometry() (one mesh, transforms applied) or "
+                         f"one of scene.geometry.values()")
     if hasattr(vertices, "vertices") and hasattr(vertices, "faces"):
         if faces is None:
             faces = vertices.faces
+        vertices = vertices.vertices
+    elif hasattr(vertices, "vertices"):          # a trimesh.PointCloud: its points
         vertices = vertices.vertices
     v = np.asarray(vertices, dtype=np.float64)
     if v.ndim != 2 or v.shape[1] != 3:

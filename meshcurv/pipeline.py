@@ -523,7 +523,8 @@ def _start_normals(v, f, given, radius, search, finite, plan, progress, point_we
     note = ("oriented like the faces" if face_normals is not None else
             "oriented towards +z" if plan.viewpoint is None else "oriented towards the viewpoint")
     if turned:
-        note += f" ({turned} of {len(f)} faces turned to the winding of their neighbours)"
+        note += (f" ({turned} of {len(f)} faces turned to wind like their neighbours, outward "
+                 f"where closed)")
     weight = (face_weights(v, f, face_normals, search.adjacency)
               if plan.face_mix and face_normals is not None else None)
     return (face_normals if plan.normals == "faces" else None), face_normals, note, weight

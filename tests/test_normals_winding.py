@@ -6,7 +6,7 @@ import numpy as np
 import meshcurv
 from meshcurv import surfaces
 from meshcurv.neighbors import edge_adjacency
-from meshcurv.normals.winding import coherent_faces, same_direction_edges
+from meshcurv.normals.winding import coherent_faces, directed_edge_counts
 
 
 def _torus():
@@ -20,22 +20,26 @@ def _flipped(f, share, seed=0):
     return out, int(turn.sum())
 
 
-def _same_direction_spec(f):
-    """Plain numpy: directed face edges that repeat one already seen."""
+def _counts_spec(f, indptr, indices):
+    """Plain numpy: for each adjacency entry (row a, entry b), the faces running a -> b."""
     a, b = f.ravel(), f[:, [1, 2, 0]].ravel()
     proper = a != b
-    directed = np.column_stack([a[proper], b[proper]])
-    return len(directed) - len(np.unique(directed, axis=0))
+    n = len(indptr) - 1
+    runs = np.bincount(a[proper] * n + b[proper], minlength=n * n)
+    rows = np.repeat(np.arange(n), np.diff(indptr))
+    return runs[rows * n + indices]
 
 
-def test_same_direction_edges_against_numpy():
+def test_directed_edge_counts_against_numpy():
     s = _torus()
     for share in (0.0, 0.1, 0.5):
         f, _ = _flipped(s.faces, share, seed=3)
         f[:5, 1] = f[:5, 0]                           # degenerate faces too
+        f = f[10:]                                    # and a border
         indptr, indices = edge_adjacency(f, len(s.vertices))
-        assert same_direction_edges(f, indptr, indices) == _same_direction_spec(f)
-    assert _same_direction_spec(s.faces) == 0
+        counts = directed_edge_counts(f, indptr, indices)
+        assert np.array_equal(counts, _counts_spec(f, indptr, indices))
+        assert (counts > 1).any() == (share > 0)
 
 
 def test_closed_mesh_turned_back_outward():
@@ -47,14 +51,22 @@ def test_closed_mesh_turned_back_outward():
         assert turned == n_turned
 
 
-def test_coherent_meshes_untouched():
+def test_coherent_meshes_untouched_closed_inward_ones_turned():
     s = _torus()
     out, turned = coherent_faces(s.vertices, s.faces)
     assert out is s.faces and turned == 0
-    # wound inward throughout: coherent, so taken as the user gives it
-    inward = s.faces[:, ::-1]
-    out, turned = coherent_faces(s.vertices, inward)
-    assert out is inward and turned == 0
+    # wound inward throughout (closed): turned outward
+    out, turned = coherent_faces(s.vertices, s.faces[:, ::-1])
+    assert np.array_equal(out, s.faces) and turned == len(s.faces)
+    # a mirror image keeps the faces, which then wind inward
+    mirrored = s.vertices * [-1.0, 1.0, 1.0]
+    out, turned = coherent_faces(mirrored, s.faces)
+    assert np.array_equal(out, s.faces[:, ::-1]) and turned == len(s.faces)
+    # open and coherent, either way round: as given
+    half = s.faces[(s.vertices[s.faces][:, :, 0] > 0).all(axis=1)]
+    for f in (half, half[:, ::-1]):
+        out, turned = coherent_faces(s.vertices, f)
+        assert out is f and turned == 0
 
 
 def test_open_pieces_keep_the_winding_of_most_of_their_area():
@@ -92,4 +104,15 @@ def test_curvature_of_a_badly_wound_mesh_equals_the_coherent_one():
         assert np.array_equal(getattr(res, name), getattr(plain, name), equal_nan=True), name
     assert plain.orientation == "oriented like the faces"
     assert res.orientation == (f"oriented like the faces ({n_turned} of {len(f)} faces turned "
-                               f"to the winding of their neighbours)")
+                               f"to wind like their neighbours, outward where closed)")
+    # a mirrored torus: the faces wind inward; the curvature stays convex-positive outward,
+    # as accurate as on the torus itself (a reflection turns the sampling planes: not bit for
+    # bit)
+    t = surfaces.torus(2.0, 0.5, n_major=120, n_minor=30)
+    plain = meshcurv.principal_curvatures(t.vertices, t.faces)
+    res = meshcurv.principal_curvatures(t.vertices * [-1.0, 1.0, 1.0], t.faces)
+    assert "faces turned" in res.orientation
+    for name in ("k1", "k2"):
+        err, err_plain = (np.nanmean(np.abs(getattr(r, name) - getattr(t, name)))
+                          for r in (res, plain))
+        assert err < 1.2 * err_plain + 1e-3, (name, err, err_plain)

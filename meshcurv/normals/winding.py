@@ -1,32 +1,34 @@
-"""Faces wound coherently: where a mesh's triangles are wound against their neighbours (two
-faces running through a shared edge in the same direction), the face normals - and with
-them the normals' orientation and every curvature's sign - flip from face to face.
+"""Faces wound coherently and outward: where a mesh's triangles are wound against their
+neighbours (two faces running through a shared edge in the same direction), the face
+normals - and with them the normals' orientation and every curvature's sign - flip from face
+to face; where a closed surface is wound inward (a mirrored model), every sign is flipped.
 :func:`coherent_faces` turns such faces so that each connected piece is wound one way,
 outward where the piece is closed (positive enclosed volume), and as most of its area was
 wound where it is open; what MeshLab's "Re-Orient all faces coherently" and trimesh's
-``repair.fix_winding`` do before their curvature filters. Meshes wound coherently are not
-touched.
-"""
+``repair.fix_winding`` and ``fix_inversion`` do. Coherent open meshes and outward closed
+ones are not touched."""
 
 import numpy as np
 from numba import njit
+from scipy import sparse
+from scipy.sparse.csgraph import connected_components
 
 from ..neighbors.kring import edge_adjacency
 
-__all__ = ["coherent_faces", "same_direction_edges"]
+__all__ = ["coherent_faces", "directed_edge_counts"]
 
 
 @njit(cache=True)
-def same_direction_edges(faces, indptr, indices):
-    """Number of face edges that another face runs through in the same direction.
+def directed_edge_counts(faces, indptr, indices):
+    """How many faces run through each directed edge: (nnz,) int32 aligned with ``indices``.
 
     ``faces`` (m, 3) int64; ``indptr, indices`` the mesh's
     :func:`meshcurv.neighbors.edge_adjacency` (rows sorted). Each directed edge a -> b of a
-    face is counted at b's place in a's row; a coherently wound (or non-manifold but
-    consistent) mesh gives 0. Degenerate edges (a == b) are skipped.
+    face is counted at b's place in a's row. A count above 1: faces wound against each
+    other; 0: an edge of one face only (a border) or run through one way only. Degenerate
+    edges (a == b) are skipped.
     """
     count = np.zeros(indices.shape[0], dtype=np.int32)
-    clashes = 0
     for f in range(faces.shape[0]):
         for c in range(3):
             a = faces[f, c]
@@ -42,9 +44,29 @@ def same_direction_edges(faces, indptr, indices):
                 else:
                     hi = mid
             count[lo] += 1
-            if count[lo] > 1:
-                clashes += 1
-    return clashes
+    return count
+
+
+@njit(cache=True)
+def _piece_volumes(vertices, faces, piece, n_pieces, origin):
+    """Signed volume (times 6) enclosed by each piece's faces about ``origin`` (3,), and the
+    sum of the faces' absolute contributions: two (n_pieces,) float64 arrays; faces with a
+    non-finite corner are left out."""
+    volume = np.zeros(n_pieces)
+    scale = np.zeros(n_pieces)
+    for f in range(faces.shape[0]):
+        i, j, k = faces[f, 0], faces[f, 1], faces[f, 2]
+        a0, a1, a2 = (vertices[i, 0] - origin[0], vertices[i, 1] - origin[1],
+                      vertices[i, 2] - origin[2])
+        b0, b1, b2 = (vertices[j, 0] - origin[0], vertices[j, 1] - origin[1],
+                      vertices[j, 2] - origin[2])
+        c0, c1, c2 = (vertices[k, 0] - origin[0], vertices[k, 1] - origin[1],
+                      vertices[k, 2] - origin[2])
+        det = a0 * (b1 * c2 - b2 * c1) - a1 * (b0 * c2 - b2 * c0) + a2 * (b0 * c1 - b1 * c0)
+        if np.isfinite(det):
+            volume[piece[f]] += det
+            scale[piece[f]] += abs(det)
+    return volume, scale
 
 
 @njit(cache=True)
@@ -79,8 +101,8 @@ def _propagate_turns(indptr, indices, clash, n_faces):
 
 def coherent_faces(vertices, faces, adjacency=None):
     """``(faces, n_turned)``: ``faces`` ((m, 3) int64) with the rows that were wound against
-    their neighbours reversed, and how many; ``faces`` itself and 0 where the mesh is wound
-    coherently.
+    their neighbours, or inward on a closed piece, reversed, and how many; ``faces`` itself
+    and 0 where there are none.
 
     Each connected piece (faces joined through edges two faces share) is wound like its first
     face, then turned as a whole to face outward where it is closed (no edge with one face:
@@ -94,8 +116,9 @@ def coherent_faces(vertices, faces, adjacency=None):
     if len(f) == 0:
         return f, 0
     indptr, indices = edge_adjacency(f, len(v)) if adjacency is None else adjacency
-    if same_direction_edges(f, indptr, indices) == 0:
-        return faces, 0
+    counts = directed_edge_counts(f, indptr, indices)
+    if not (counts > 1).any():
+        return _outward_closed_pieces(v, faces, indptr, indices, counts)
     m = len(f)
     a = f.ravel()
     b = f[:, [1, 2, 0]].ravel()
@@ -130,6 +153,33 @@ def coherent_faces(vertices, faces, adjacency=None):
     kept_area = np.bincount(piece, weights=np.nan_to_num(area) * (1 - turn), minlength=n_pieces)
     flip_piece = np.where(open_piece, turned_area > kept_area, volume_sum < 0)
     turn = turn.astype(bool) ^ flip_piece[piece]
+    out = f.copy()
+    out[turn] = f[turn][:, ::-1]
+    return out, int(turn.sum())
+
+
+def _outward_closed_pieces(v, faces, indptr, indices, counts):
+    """:func:`coherent_faces` of a coherently wound mesh: the pieces (vertices joined by
+    edges) that are closed (every edge run through both ways) and enclose a negative volume
+    - wound inward, e.g. after a mirroring - turned; ``faces`` itself where there is none."""
+    f = np.asarray(faces, dtype=np.int64)
+    n = len(v)
+    n_pieces, vertex_piece = connected_components(
+        sparse.csr_matrix((np.ones(len(indices), dtype=np.int8), indices, indptr), shape=(n, n)),
+        directed=False)
+    border = np.zeros(n_pieces, dtype=bool)
+    one_way = np.flatnonzero(counts == 0)          # entries of border edges: their rows
+    border[vertex_piece[np.searchsorted(indptr, one_way, side="right") - 1]] = True
+    if border.all():
+        return faces, 0
+    piece = vertex_piece[f[:, 0]]
+    with np.errstate(invalid="ignore"):
+        origin = np.nanmean(v, axis=0)
+    volume, scale = _piece_volumes(v, f, piece, n_pieces, origin)
+    inward = ~border & (volume < -1e-9 * scale)
+    if not inward.any():
+        return faces, 0
+    turn = inward[piece]
     out = f.copy()
     out[turn] = f[turn][:, ::-1]
     return out, int(turn.sum())

@@ -1,0 +1,25 @@
+"""What the estimator takes besides arrays: trimesh's mesh, point cloud and scene."""
+
+import numpy as np
+import pytest
+import trimesh
+
+import meshcurv
+
+
+def test_trimesh_point_cloud_is_its_points():
+    # trimesh.load of a PLY without faces gives a PointCloud
+    rng = np.random.default_rng(0)
+    p = rng.normal(size=(3000, 3))
+    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    res = meshcurv.principal_curvatures(trimesh.PointCloud(p))
+    plain = meshcurv.principal_curvatures(p)
+    assert np.array_equal(res.k1, plain.k1, equal_nan=True)
+    assert abs(np.nanmedian(res.k1) - 1.0) < 1e-3
+
+
+def test_trimesh_scene_refused_in_one_line():
+    scene = trimesh.Scene([trimesh.creation.icosphere(2), trimesh.creation.box()])
+    with pytest.raises(ValueError, match=r"trimesh.Scene holds 2 geometries.*to_geometry") as e:
+        meshcurv.principal_curvatures(scene)
+    assert "\n" not in str(e.value)

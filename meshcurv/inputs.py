@@ -8,10 +8,11 @@ __all__ = ["as_arrays"]
 def as_arrays(vertices, faces=None, normals=None):
     """``(v, f, nv)``: the estimator's inputs validated and converted.
 
-    ``v`` (n, 3) float64 contiguous; ``f`` (m, 3) int64 with indices in 0..n-1, or None; ``nv``
-    (n, 3) float64, or None. A trimesh.Trimesh supplies vertices and faces, a
-    trimesh.PointCloud its points (a trimesh.Scene is refused: it is no one surface). Raises
-    ValueError (one line) for wrong shapes, non-integer faces and face indices out of range.
+    ``v`` (n, 3) float64 contiguous; ``f`` (m, 3) int64 with indices in 0..n-1, or None (also
+    for an empty face list: the points are then a cloud); ``nv`` (n, 3) float64, or None. A
+    trimesh.Trimesh supplies vertices and faces, a trimesh.PointCloud its points (a
+    trimesh.Scene is refused: it is no one surface). Raises ValueError (one line) for wrong
+    shapes, non-integer faces and face indices out of range.
     """
     if hasattr(vertices, "geometry") and hasattr(vertices, "graph"):
         raise ValueError(f"a trimesh.Scene holds {len(vertices.geometry)} geometries, not one "
@@ -41,6 +42,8 @@ def as_arrays(vertices, faces=None, normals=None):
         if f.size and (f.min() < 0 or f.max() >= len(v)):
             raise ValueError(
                 f"faces index vertices 0..{len(v) - 1}, found indices {f.min()}..{f.max()}")
+        if f.size == 0:
+            f = None            # no faces (trimesh.Trimesh(vertices=points)): a point cloud
     nv = None
     if normals is not None:
         nv = np.asarray(normals, dtype=np.float64)

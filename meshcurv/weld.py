@@ -96,7 +96,7 @@ def welded_mesh(vertices, faces, normals, welding):
     total = np.column_stack([np.bincount(welding.index[usable], unit[usable, a], minlength=k)
                              for a in range(3)])
     length = np.linalg.norm(total, axis=1)
-    nw = normals[welding.keep].copy()
+    nw = normals[welding.keep]
     copies = np.bincount(welding.index, minlength=k)
     mean = (copies > 1) & (length > 1e-6 * np.bincount(welding.index[usable], minlength=k))
     nw[mean] = total[mean] / length[mean, None]

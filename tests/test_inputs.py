@@ -23,3 +23,16 @@ def test_trimesh_scene_refused_in_one_line():
     with pytest.raises(ValueError, match=r"trimesh.Scene holds 2 geometries.*to_geometry") as e:
         meshcurv.principal_curvatures(scene)
     assert "\n" not in str(e.value)
+
+
+def test_no_faces_is_a_point_cloud():
+    # an empty face list (trimesh.Trimesh(vertices=points)) made every row NO_NORMAL: the
+    # mesh path found no face normals; the points are a cloud
+    rng = np.random.default_rng(1)
+    p = rng.normal(size=(3000, 3))
+    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    plain = meshcurv.principal_curvatures(p)
+    for res in (meshcurv.principal_curvatures(p, np.zeros((0, 3), dtype=np.int64)),
+                meshcurv.principal_curvatures(trimesh.Trimesh(vertices=p))):
+        assert np.array_equal(res.k1, plain.k1, equal_nan=True)
+        assert res.valid.all()

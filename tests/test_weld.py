@@ -12,6 +12,12 @@ def _torus(n_major=60, n_minor=15):
     return surfaces.torus(2.0, 0.5, n_major=n_major, n_minor=n_minor)
 
 
+def _soup_after_vertices(v, f):
+    """The mesh's vertices, then one copy per triangle corner, the faces on the copies."""
+    n = len(v)
+    return np.concatenate([v, v[f].reshape(-1, 3)]), n + np.arange(3 * len(f)).reshape(-1, 3)
+
+
 def _rows_equal(a, b, rows_a=slice(None), rows_b=slice(None)):
     """Every per-row field of two results equal bit for bit (NaN equal to NaN)."""
     for name in ("k1", "k2", "d1", "d2", "normals", "valid", "n_neighbors", "n_samples",
@@ -60,8 +66,7 @@ def test_soup_after_its_vertices_equals_the_mesh_bit_for_bit():
     s = _torus()
     v, f = s.vertices, s.faces
     n = len(v)
-    soup_v = np.concatenate([v, v[f].reshape(-1, 3)])
-    soup_f = n + np.arange(3 * len(f)).reshape(-1, 3)
+    soup_v, soup_f = _soup_after_vertices(v, f)
     plain = meshcurv.principal_curvatures(v, f)
     res = meshcurv.principal_curvatures(soup_v, soup_f)
     assert len(res) == len(soup_v)
@@ -142,8 +147,7 @@ def test_query_and_radius_list_on_a_soup():
     s = _torus()
     v, f = s.vertices, s.faces
     n = len(v)
-    soup_v = np.concatenate([v, v[f].reshape(-1, 3)])
-    soup_f = n + np.arange(3 * len(f)).reshape(-1, 3)
+    soup_v, soup_f = _soup_after_vertices(v, f)
     copy = n + int(np.flatnonzero(f.ravel() == 7)[0])
     query = [copy, 7, 3, 7]
     res = meshcurv.principal_curvatures(soup_v, soup_f, query=query)

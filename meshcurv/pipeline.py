@@ -84,6 +84,12 @@ BIAS_TILT_SCALE = 0.03
 # standard error is then about 2 % of the estimate.
 GIVEN_SAMPLE = 4096
 
+# Share of sampled points whose given normal faces away from most of their neighbors' above
+# which the result's orientation note says so (:func:`facing_away`): 0 on consistently
+# oriented normals over smooth surfaces, about one half for unoriented ones; 1 % of the
+# normals flipped at random gives about 1 %.
+GIVEN_AWAY_SHARE = 0.05
+
 # Radii, as multiples of the call's, at which :func:`retry_sparse` re-estimates the vertices
 # whose ball held too few points, each at the smallest that serves (the larger the ball, the
 # more the curvature varies inside it): up to 16 times the area, so a patch sampled 16 times
@@ -509,7 +515,7 @@ def _start_normals(v, f, given, radius, search, finite, plan, progress, point_we
     per-vertex weight of the face normals in the blocks' plane-fit normals
     (:func:`face_weights`), or None."""
     if plan.normals == "given":
-        return given, None, "as given", None
+        return given, None, _given_note(given, search, finite), None
     if plan.normals == "mst":
         normals, note = _spanning_tree_normals(v, radius, search, finite, progress,
                                                point_weights)
@@ -528,6 +534,38 @@ def _start_normals(v, f, given, radius, search, finite, plan, progress, point_we
     weight = (face_weights(v, f, face_normals, search.adjacency)
               if plan.face_mix and face_normals is not None else None)
     return (face_normals if plan.normals == "faces" else None), face_normals, note, weight
+
+
+def facing_away(given, search, rows, size=GIVEN_SAMPLE):
+    """Share of up to ``size`` of the vertices ``rows`` whose given normal (``given`` (n, 3))
+    faces away (negative dot product) from the normals of more than half of their neighbors:
+    near 0 for normals oriented consistently over a smooth surface, near one half for
+    unoriented ones (a plane fit's sign left as it fell); NaN where none was sampled."""
+    sample = rows[_sample_queries(len(rows), size)]
+    indptr, indices = search.neighbors(sample)
+    nbr = indices if search.rank is None else search.rank[indices]
+    own = np.repeat(np.arange(len(sample)), np.diff(indptr))
+    with np.errstate(invalid="ignore"):
+        dots = np.einsum("ij,ij->i", given[sample[own]], given[nbr])
+    usable = (nbr != sample[own]) & np.isfinite(dots)
+    counted = np.bincount(own[usable], minlength=len(sample))
+    away = np.bincount(own[usable & (dots < 0.0)], minlength=len(sample))
+    seen = counted > 0
+    return float(np.mean(away[seen] > 0.5 * counted[seen])) if seen.any() else np.nan
+
+
+def _given_note(given, search, finite):
+    """``CurvatureResult.orientation`` for normals used as given: "as given", and where many
+    of them face away from their neighbors' (:func:`facing_away` at least
+    ``GIVEN_AWAY_SHARE``), that the curvature's signs follow each of them."""
+    rows = np.arange(len(given)) if finite is None else finite
+    share = facing_away(given, search, rows) if len(rows) else np.nan
+    if not share >= GIVEN_AWAY_SHARE:
+        return "as given"
+    return (f"as given; {100 * share:.0f} % of the points sampled face away from most of "
+            f"their neighbours' normals (unoriented normals?): each curvature's sign follows "
+            f"its point's normal; orient them consistently, or pass none to have them "
+            f"estimated and oriented")
 
 
 def face_weights(v, f, face_normals, adjacency=None):

@@ -36,3 +36,4 @@ def test_no_faces_is_a_point_cloud():
                 meshcurv.principal_curvatures(trimesh.Trimesh(vertices=p))):
         assert np.array_equal(res.k1, plain.k1, equal_nan=True)
         assert res.valid.all()
+

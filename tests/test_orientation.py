@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import meshcurv
-from meshcurv import cli, io
+from meshcurv import cli, io, surfaces
 from meshcurv.normals.orient import PIECE_RULES, piece_signs
 
 CNC = "/work/shared/bench/cnc"
@@ -313,3 +313,24 @@ def test_tile_area_weights_are_those_of_the_spanning_tree_graph():
     graph = np.where(near >= 0, search.rank[near], -1)
     np.testing.assert_allclose(nearest_areas(p, p, radius, TREE_NEIGHBORS),
                                sample_areas(p, graph), rtol=1e-12)
+
+
+def test_unoriented_given_normals_are_named_in_the_orientation_note():
+    # given normals whose signs fell at random (a plane fit left unoriented): the curvature's
+    # signs follow them, and the note says so; oriented ones, even noisy, are "as given"
+    rng = np.random.default_rng(2)
+    p = rng.normal(size=(4000, 3))
+    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    noisy = p + rng.normal(scale=0.2, size=p.shape)
+    assert meshcurv.principal_curvatures(p, normals=noisy).orientation == "as given"
+    signs = np.where(rng.uniform(size=len(p)) < 0.5, -1.0, 1.0)
+    note = meshcurv.principal_curvatures(p, normals=p * signs[:, None]).orientation
+    share = int(note.split("as given; ")[1].split(" %")[0])
+    assert 40 <= share <= 60, note
+    # a mesh, with its k-rings
+    s = surfaces.torus(2.0, 0.5, n_major=60, n_minor=15)
+    assert meshcurv.principal_curvatures(s.vertices, s.faces,
+                                         normals=s.normals).orientation == "as given"
+    flipped = s.normals * np.where(np.arange(len(s.normals)) % 2, -1.0, 1.0)[:, None]
+    assert "face away" in meshcurv.principal_curvatures(s.vertices, s.faces,
+                                                        normals=flipped).orientation

@@ -507,13 +507,16 @@ def _spanning_tree_normals(v, radius, search, finite, progress, point_weights=No
                        point_weights)
 
 
-def _start_normals(v, f, given, radius, search, finite, plan, progress, point_weights=None):
+def _start_normals(v, f, given, radius, search, finite, plan, progress, point_weights=None,
+                   turned=0):
     """``(normals, face_normals, note, face_weight)`` before the blocks: the given ones, the
     faces', or the spanning tree's (which needs every normal first); None where blocks
     estimate their own. ``finite``: the finite rows of ``v`` (ball searches only); ``note``:
     how the normals get their sign (``CurvatureResult.orientation``); ``face_weight``: the
     per-vertex weight of the face normals in the blocks' plane-fit normals
-    (:func:`face_weights`), or None."""
+    (:func:`face_weights`), or None. ``f`` wound coherently and outward already
+    (:func:`meshcurv.normals.winding.coherent_faces`), ``turned`` faces of the input's turned
+    to make it so (the note says how many)."""
     if plan.normals == "given":
         return given, None, _given_note(given, search, finite), None
     if plan.normals == "mst":
@@ -521,9 +524,7 @@ def _start_normals(v, f, given, radius, search, finite, plan, progress, point_we
                                                point_weights)
         return normals, None, note, None
     face_normals = None
-    turned = 0
     if f is not None:
-        f, turned = coherent_faces(v, f, search.adjacency)
         with np.errstate(invalid="ignore"):       # NaN vertices give NaN normals
             face_normals = face_vertex_normals(v, f)
     note = ("oriented like the faces" if face_normals is not None else
@@ -915,8 +916,12 @@ def run_radii(v, f, given_normals, radii, query, plan, progress=False):
         shared = ball_search(v, finite, max(radii))
         searches = [shared] * len(radii)
         block = block_size(shared, query, max(radii), what)
-    scales = [_prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progress)
-              for s, r in zip(searches, radii)]
+    # faces wound coherently and outward once for every radius: they orient the face normals
+    turned = 0
+    if f is not None and plan.normals not in ("given", "mst"):
+        f, turned = coherent_faces(v, f, searches[0].adjacency)
+    scales = [_prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progress,
+                             turned) for s, r in zip(searches, radii)]
     outs = [_Outputs(len(query)) for _ in radii]
     # queries by grid cell for ball queries (the points a block touches then stay in cache);
     # as given for k-rings, whose memory accesses follow the mesh's own numbering
@@ -970,15 +975,18 @@ class _Scale(NamedTuple):
     face_weight: object = None
 
 
-def _prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progress):
-    """The :class:`_Scale` of radius ``r`` over the search ``s``."""
+def _prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progress,
+                   turned=0):
+    """The :class:`_Scale` of radius ``r`` over the search ``s``; ``turned``: see
+    :func:`_start_normals`."""
     score = weights = weight = tree = plain = halves = None
     # a cloud's estimated normals get the wide field's mix (see below); the split halves of
     # its balls come with the outlier pass's lists when they are of this radius
     mixes = plan.normal_constraints and plan.refine and f is None and plan.wide_field
     # not from the lists: before the outlier pass, whose plane fits take the faces' sides
     start = None if plan.normals == "mst" else _start_normals(v, f, given_normals, r, s,
-                                                              finite, plan, progress)
+                                                              finite, plan, progress,
+                                                              turned=turned)
     if plan.robust_points:
         # scores by vertex; weights by row of s.points (the grid's order where it has one);
         # the same lists give the spanning tree's or the unweighted plane-fit normals

@@ -116,3 +116,19 @@ def test_curvature_of_a_badly_wound_mesh_equals_the_coherent_one():
         err, err_plain = (np.nanmean(np.abs(getattr(r, name) - getattr(t, name)))
                           for r in (res, plain))
         assert err < 1.2 * err_plain + 1e-3, (name, err, err_plain)
+
+
+def test_command_line_says_how_many_faces_were_turned(tmp_path, capsys):
+    # the orientation line of `meshcurv annotate` names the turned faces and does not offer
+    # --viewpoint, which meshes do not use
+    import trimesh
+
+    from meshcurv import cli
+    s = _torus()
+    f, n_turned = _flipped(s.faces, 0.3)
+    trimesh.Trimesh(s.vertices, f, process=False).export(str(tmp_path / "wound.ply"))
+    assert cli.main(["annotate", str(tmp_path / "wound.ply"), "-o", str(tmp_path / "o.ply")]) == 0
+    out = capsys.readouterr().out
+    assert (f"meshcurv: normals oriented like the faces ({n_turned} of {len(f)} faces turned "
+            f"to wind like their neighbours, outward where closed)\n") in out
+    assert "--viewpoint" not in out

@@ -137,9 +137,9 @@ def orientation_for(input_path, options):
 def orientation_line(note, input_path, options):
     """The one line telling the user how the normals got their sign: ``note`` is
     ``CurvatureResult.orientation`` of the run on ``input_path`` with ``options``."""
-    if note == "as given":
-        return "meshcurv: normals taken from the file as they are"
-    if note == "oriented like the faces" or options.viewpoint is not None:
+    if note.startswith("as given"):
+        return "meshcurv: normals taken from the file as they are" + note[len("as given"):]
+    if note.startswith("oriented like the faces") or options.viewpoint is not None:
         return f"meshcurv: normals {note}"
     why = "LAS input; " if orientation_for(input_path, options) == "+z" else ""
     return f"meshcurv: normals {note} ({why}--viewpoint to change)"

@@ -19,7 +19,18 @@ def _check_query(query, n):
     """(q,) int64 vertex indices to estimate at (all n by default), checked to lie in range."""
     if query is None:
         return np.arange(n, dtype=np.int64)
-    query = np.asarray(query, dtype=np.int64).ravel()
+    given = np.asarray(query)
+    if given.dtype == bool:
+        # a mask of the rows to estimate, as numpy indexing reads it
+        if given.shape != (n,):
+            raise ValueError(f"a boolean query must be a mask of shape ({n},), got {given.shape}")
+        return np.flatnonzero(given)
+    if given.size and not np.issubdtype(given.dtype, np.integer):
+        whole = np.issubdtype(given.dtype, np.number) and np.all(np.mod(given, 1) == 0)
+        if not whole:
+            raise ValueError(f"query must hold vertex indices (integers) or a boolean mask, "
+                             f"got {given.dtype} values")
+    query = given.astype(np.int64).ravel()
     if query.size and (query.min() < 0 or query.max() >= n):
         raise ValueError(f"query indices must lie in 0..{n - 1}")
     return query
@@ -27,7 +38,11 @@ def _check_query(query, n):
 
 def _check_radius(radius):
     """A positive finite float radius, else ValueError."""
-    radius = float(radius)
+    try:
+        radius = float(radius)
+    except (TypeError, ValueError):
+        raise ValueError(f"radius must be a positive finite number of model units, got "
+                         f"{radius!r}") from None
     if not (np.isfinite(radius) and radius > 0):
         raise ValueError(f"radius must be a positive finite number of model units, got {radius}")
     return radius

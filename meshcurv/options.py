@@ -39,6 +39,25 @@ ORIENTATIONS = ("mst", "+z")
 MAX_DIRECTIONS = 64
 
 
+# Ranges of the numeric switches (low exclusive for slab, inclusive otherwise): a slab of
+# half-width 0 holds no point and one wider than the ball holds the whole ball (every
+# half-set sees every direction); a half-set cannot reach beyond the ball (min_spread <= 1).
+_RANGES = (("slab", 0.0, 1.0), ("min_points", 1.0, np.inf), ("min_spread", 0.0, 1.0))
+
+
+def _check_in_range(name, value, low, high):
+    """ValueError (one line) unless ``value`` is a real number in ``(low, high]`` for
+    ``slab``, ``[low, high]`` otherwise."""
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        x = np.nan
+    above = x > low if name == "slab" else x >= low
+    if isinstance(value, (bool, np.bool_)) or not (above and x <= high):
+        side = "(" if name == "slab" else "["
+        raise ValueError(f"{name} must be a number in {side}{low:g}, {high:g}], got {value!r}")
+
+
 def check_options(**options):
     """Check option names and values of :func:`meshcurv.principal_curvatures` without running it.
 
@@ -69,6 +88,11 @@ def check_options(**options):
         if not ok:
             raise ValueError(f"n_directions must be a whole number from 3 to {MAX_DIRECTIONS}, "
                              f"got {nd!r}")
+    for name, low, high in _RANGES:
+        if name in options:
+            _check_in_range(name, options[name], low, high)
+    if "min_points" in options and float(options["min_points"]) != int(options["min_points"]):
+        raise ValueError(f"min_points must be a whole number, got {options['min_points']!r}")
     orientation = options.get("orientation", "mst")
     if isinstance(orientation, str) and orientation in ORIENTATIONS:
         return orientation

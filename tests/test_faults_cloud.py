@@ -255,6 +255,45 @@ def test_n_directions_at_the_bounds_is_accepted():
     assert options.MAX_DIRECTIONS == 64
 
 
+@pytest.mark.parametrize("name, bad", [("slab", 0), ("slab", -0.1), ("slab", float("nan")),
+                                       ("slab", "wide"), ("slab", 5), ("min_points", -5),
+                                       ("min_points", 2.5), ("min_spread", float("nan")),
+                                       ("min_spread", 1.5), ("min_spread", True)])
+def test_slab_and_half_set_limits_out_of_range_are_refused_in_one_line(name, bad):
+    # a slab of width 0 left every row TOO_FEW_HALF_SETS and one of 5 radii every row
+    # DEGENERATE_DIRECTIONS, silently; 'wide' failed inside float()
+    with pytest.raises(ValueError, match=f"^{name} must be a "):
+        meshcurv.principal_curvatures(SPHERE.vertices, radius=RADIUS, **{name: bad})
+
+
+def test_slab_and_half_set_limits_in_range_are_accepted():
+    for name, ok in (("slab", 1.0), ("slab", 0.05), ("min_points", 1), ("min_points", 40.0),
+                     ("min_spread", 0.0), ("min_spread", 1.0)):
+        options.check_options(**{name: ok})
+
+
+def test_a_boolean_query_is_a_mask_and_fractional_indices_are_refused():
+    # a mask was read as the indices 0 and 1: every row vertex 0's or vertex 1's estimate
+    n = len(SPHERE.vertices)
+    mask = np.zeros(n, dtype=bool)
+    mask[[3, 17, 200]] = True
+    part = meshcurv.principal_curvatures(SPHERE.vertices, radius=RADIUS, query=mask)
+    rows = meshcurv.principal_curvatures(SPHERE.vertices, radius=RADIUS, query=[3, 17, 200])
+    assert len(part) == 3 and np.array_equal(part.k1, rows.k1, equal_nan=True)
+    assert len(meshcurv.principal_curvatures(SPHERE.vertices, radius=RADIUS,
+                                             query=[2.0, 5.0])) == 2
+    with pytest.raises(ValueError, match="boolean query must be a mask of shape"):
+        meshcurv.principal_curvatures(SPHERE.vertices, radius=RADIUS, query=mask[:10])
+    with pytest.raises(ValueError, match="query must hold vertex indices"):
+        meshcurv.principal_curvatures(SPHERE.vertices, radius=RADIUS, query=[1.7])
+
+
+@pytest.mark.parametrize("bad", [None, "auto", "x"])
+def test_estimate_normals_names_a_bad_radius_in_one_line(bad):
+    with pytest.raises(ValueError, match="radius must be a positive finite number"):
+        meshcurv.estimate_normals(SPHERE.vertices, bad)
+
+
 def test_cli_refuses_100000_directions_in_one_line(tmp_path):
     example = os.path.join(os.path.dirname(__file__), "..", "examples", "torus.ply")
     proc = subprocess.run([sys.executable, "-m", "meshcurv", "annotate", example, "-o",

@@ -19,6 +19,10 @@ MAX_BALL_FRACTION = 0.25
 # vertices at 1.70 on the unit sphere).
 RING_MARGIN = 1.25
 
+# Most growth steps of the default radius where its balls hold too few points
+# (:func:`_grown_to_target`): each multiplies it by the square root of the missing share.
+_GROW_STEPS = 8
+
 # Lengths outside [2**-200, 2**200] are computed on coordinates scaled by a power of two
 # (exact): their squares would overflow or lose precision in float64.
 _SCALE_RANGE = (2.0 ** -200, 2.0 ** 200)
@@ -53,7 +57,9 @@ def default_radius(points, target_neighbors=100, sample=20000, seed=0, faces=Non
 
     The local area density is estimated from the distance d16 to the 16th nearest neighbor,
     ``rho = 16 / (pi d16^2)``, on up to ``sample`` points; the radius is
-    ``sqrt(target / (pi rho))`` with the median of d16^2. For a regular grid of spacing h this
+    ``sqrt(target / (pi rho))`` with the median of d16^2, grown where the median ball of that
+    radius holds fewer than half the target (samplings far denser in one direction than the
+    other, see :func:`_grown_to_target`). For a regular grid of spacing h this
     is about 5.6 h; for a mesh about 5 mean edge lengths. A few far-away points do not move it
     (a median); duplicated points count once where most points are duplicates; clouds of any
     scale (1e-300 ... 1e300) are measured on coordinates scaled by a power of two. Small inputs
@@ -129,9 +135,32 @@ def _default_radius(p, target_neighbors, sample, seed):
     k = max(1, min(16, len(p) - 1, int(target_neighbors)))
     rng = np.random.default_rng(seed)
     probe = p if len(p) <= sample else p[rng.choice(len(p), sample, replace=False)]
-    d, _ = cKDTree(p).query(probe, k=k + 1, workers=-1)
+    tree = cKDTree(p)
+    d, _ = tree.query(probe, k=k + 1, workers=-1)
     with np.errstate(over="ignore"):
         dk2 = np.median(d[:, k] ** 2)
     if not (np.isfinite(dk2) and dk2 > 0):
         return float("nan")
-    return float(np.sqrt(target_neighbors / k * dk2))
+    radius = float(np.sqrt(target_neighbors / k * dk2))
+    # the area density extrapolated from k neighbors to the target, checked where it was
+    return _grown_to_target(tree, probe, radius, target_neighbors) if target_neighbors > k \
+        else radius
+
+
+def _grown_to_target(tree, probe, radius, target_neighbors):
+    """``radius``, or larger where its balls (about the ``probe`` points, in ``tree``) hold
+    fewer than half of ``target_neighbors`` points in the median: the area density of the 16
+    nearest neighbors does not hold at the radius where the sampling is not even in two
+    directions (scan lines far denser along the line than across it: the 16 nearest all lie
+    on the point's own line, and a ball of the radius they give reaches no other line). Grown
+    by the square root of the missing share (an area's count) until the median ball holds the
+    whole target (at most ``_GROW_STEPS`` steps)."""
+    enough = 0.5 * target_neighbors
+    for _ in range(_GROW_STEPS):
+        count = float(np.median(tree.query_ball_point(probe, radius, return_length=True,
+                                                      workers=-1))) - 1.0
+        if count >= enough:
+            break
+        enough = target_neighbors
+        radius *= math.sqrt(target_neighbors / max(count, 1.0))
+    return radius

@@ -22,6 +22,8 @@ RING_MARGIN = 1.25
 # Most growth steps of the default radius where its balls hold too few points
 # (:func:`_grown_to_target`): each multiplies it by the square root of the missing share.
 _GROW_STEPS = 8
+# Points (of the random sample) whose balls are counted for that median: 0.03 s at 1M points.
+_COUNT_SAMPLE = 4096
 
 # Lengths outside [2**-200, 2**200] are computed on coordinates scaled by a power of two
 # (exact): their squares would overflow or lose precision in float64.
@@ -156,6 +158,7 @@ def _grown_to_target(tree, probe, radius, target_neighbors):
     by the square root of the missing share (an area's count) until the median ball holds the
     whole target (at most ``_GROW_STEPS`` steps)."""
     enough = 0.5 * target_neighbors
+    probe = probe[:_COUNT_SAMPLE]
     for _ in range(_GROW_STEPS):
         count = float(np.median(tree.query_ball_point(probe, radius, return_length=True,
                                                       workers=-1))) - 1.0

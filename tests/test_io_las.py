@@ -101,6 +101,35 @@ def test_curvature_fields_round_trip_by_name_and_input_dims_unchanged(las_file, 
     assert not [f for f in os.listdir(tmp_path) if f.endswith(".part")]
 
 
+@pytest.mark.parametrize("suffix", [".las", ".laz"])
+def test_records_after_the_points_are_kept(tmp_path, suffix):
+    # a LAS 1.4 file's coordinate system as an extended record (EVLR): laspy's writer leaves
+    # such records out unless asked, and the output lost it while its header still said WKT
+    header = laspy.LasHeader(point_format=6, version="1.4")
+    header.scales = [1e-3] * 3
+    header.offsets = [500000.0, 4200000.0, 100.0]
+    header.global_encoding.wkt = True
+    wkt = b'PROJCS["WGS 84 / UTM zone 33N"]\0'
+    header.evlrs = laspy.vlrs.vlrlist.VLRList([laspy.VLR(
+        user_id="LASF_Projection", record_id=2112, description="OGC WKT", record_data=wkt)])
+    header.vlrs.append(laspy.VLR(user_id="meshcurv_test", record_id=7, record_data=b"kept"))
+    data = laspy.LasData(header)
+    xyz = _cloud(3000)
+    data.x, data.y, data.z = xyz[:, 0] + 500000.0, xyz[:, 1] + 4200000.0, xyz[:, 2] + 100.0
+    path = str(tmp_path / f"crs{suffix}")
+    data.write(path)
+    res = meshcurv.principal_curvatures(np.asarray(laspy.read(path).xyz), radius=2.0)
+    out = str(tmp_path / f"out{suffix}")
+    las.write_las_curvature(path, out, res, chunk_size=1000)
+    got = laspy.read(out)
+    assert [(r.user_id, r.record_id, r.record_data_bytes()) for r in got.header.evlrs] == [
+        ("LASF_Projection", 2112, wkt)]
+    assert got.header.global_encoding.wkt
+    assert [(r.user_id, r.record_id) for r in got.header.vlrs
+            if r.user_id == "meshcurv_test"] == [("meshcurv_test", 7)]
+    np.testing.assert_array_equal(np.asarray(got["k1"]), res.k1)
+
+
 def test_float32_fields_hold_the_rounded_values(las_file, tmp_path):
     path, xyz = las_file
     res = meshcurv.principal_curvatures(xyz, radius=2.0, orientation=VIEWPOINT)

@@ -347,7 +347,8 @@ def check_paths(in_path, out_path):
 
 
 def annotate_las(in_path, out_path, fields_for, names, chunk_size=DEFAULT_CHUNK, float_type="f8"):
-    """Copy a LAS/LAZ file chunk by chunk, adding extra-bytes dimensions; atomic.
+    """Copy a LAS/LAZ file chunk by chunk, adding extra-bytes dimensions; atomic. Its records
+    (VLRs and extended VLRs) are copied too.
 
     Parameters
     ----------
@@ -394,6 +395,10 @@ def annotate_las(in_path, out_path, fields_for, names, chunk_size=DEFAULT_CHUNK,
                 for name in names:
                     out.array[name] = fields[name]
                 writer.write_points(out)
+            if header.evlrs:
+                # the extended records after the points (a LAS 1.4 coordinate system, waveform
+                # tables): laspy's writer leaves them out unless asked
+                writer.write_evlrs(header.evlrs)
 
     atomic_write(out_path, write)
 

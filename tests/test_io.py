@@ -28,7 +28,10 @@ def test_text_and_trimesh_readers_keep_vertex_order(tmp_path):
     off = tmp_path / "a.off"
     off.write_text(f"OFF\n{len(v)} {len(f)} 0\n" + "".join(f"{a} {b} {c}\n" for a, b, c in v)
                    + "".join(f"3 {a} {b} {c}\n" for a, b, c in f))
-    for path in (obj, off):
+    # ModelNet's OFF files write the vertex count against the keyword
+    glued = tmp_path / "glued.off"
+    glued.write_text(off.read_text().replace("OFF\n", "OFF", 1))
+    for path in (obj, off, glued):
         data = io.read(str(path))
         np.testing.assert_array_equal(data.vertices, v)
         np.testing.assert_array_equal(data.faces, f)
@@ -43,6 +46,40 @@ def test_text_and_trimesh_readers_keep_vertex_order(tmp_path):
     data = io.read(str(pts))
     np.testing.assert_array_equal(data.vertices, v)
     assert data.normals is None and (data.fields["intensity"] == 7).all()
+
+
+def test_xyz_as_cloudcompare_and_windows_tools_write_it(tmp_path):
+    # x y z r g b: the colours were taken for normals (k from -5 to 4 on a sphere of k 0.5);
+    # a column header, 9 columns, a byte-order mark and a latin-1 comment were refused
+    rng = np.random.default_rng(0)
+    v = rng.normal(size=(50, 3))
+    rgb = rng.integers(1, 256, (50, 3)).astype(float)
+    n = v / np.linalg.norm(v, axis=1, keepdims=True)
+    rows = lambda *cols: "".join(" ".join(f"{x:.17g}" for x in r) + "\n"
+                                 for r in np.column_stack(cols))
+    cases = {
+        "rgb.xyz": (rows(v, rgb), None, rgb),
+        "header.xyz": ("//X Y Z R G B Nx Ny Nz\n" + rows(v, rgb, n), n, rgb),
+        "normals_first.xyz": (rows(v, n, rgb), n, rgb),
+        "bom.xyz": ("\ufeff# Scan von M\u00fcller\n" + rows(v, n), n, None),
+        "bom_only.xyz": ("\ufeff" + rows(v, n), n, None),
+    }
+    for name, (text, normals, colours) in cases.items():
+        path = tmp_path / name
+        path.write_bytes(text.encode("utf-8" if name.startswith("bom") else "latin-1"))
+        data = io.read(str(path))
+        np.testing.assert_array_equal(data.vertices, v, err_msg=name)
+        if normals is None:
+            assert data.normals is None, name
+        else:
+            np.testing.assert_array_equal(data.normals, normals, err_msg=name)
+        if colours is not None:
+            got = np.column_stack([data.fields[c] for c in ("red", "green", "blue")])
+            np.testing.assert_array_equal(got, colours, err_msg=name)
+    # axis-aligned unit normals are whole numbers too: still normals
+    axes = np.tile([0.0, 0.0, 1.0], (50, 1))
+    (tmp_path / "axes.xyz").write_text(rows(v, axes))
+    np.testing.assert_array_equal(io.read(str(tmp_path / "axes.xyz")).normals, axes)
 
 
 def test_atomic_write_removes_the_temporary_file_on_failure(tmp_path):

@@ -19,6 +19,11 @@ def _off_counts(lines):
         raise ValueError("empty file")
     head = lines[0]
     match = _OFF_KEYWORD.fullmatch(head[0])
+    glued = re.fullmatch(r"((?:ST)?C?N?OFF)(\d+)", head[0])
+    if match is None and glued:
+        # the vertex count written against the keyword ("OFF2562 5120 0": ModelNet's files)
+        head = [glued.group(1), glued.group(2)] + head[1:]
+        match = _OFF_KEYWORD.fullmatch(head[0])
     if match is None:
         raise ValueError(f"starts with {head[0][:20]!r}, not OFF")
     if match.group(2) or match.group(3):

@@ -216,6 +216,14 @@ def test_bad_options_exit_2_before_reading_anything(tmp_path, capsys, inputs, ar
     assert os.listdir(tmp_path) == [] and src.read_bytes() == before
 
 
+def test_an_output_that_is_a_directory_is_refused_before_reading(tmp_path, capsys, inputs):
+    # the run went to the end, then the rename failed naming the temporary file
+    (tmp_path / "out.ply").mkdir()
+    code, _, err = run(capsys, "annotate", inputs / "torus.ply", "-o", tmp_path / "out.ply")
+    assert code == 2 and err.count("\n") == 1 and "is a directory" in err, err
+    assert ".part" not in err and os.listdir(tmp_path / "out.ply") == []
+
+
 def test_console_entry_point_prints_no_traceback(tmp_path):
     # the installed entry point and ``python -m meshcurv`` share cli.main; run the module for real
     proc = subprocess.run([sys.executable, "-m", "meshcurv", "annotate",

@@ -26,7 +26,10 @@ _HOST = None
 
 
 def check_distinct(input_path, output_path):
-    """Raise MeshFileError if ``output_path`` names the same file as ``input_path``."""
+    """Raise MeshFileError if ``output_path`` names the same file as ``input_path``, or a
+    directory (checked before any work: the rename at the end would fail)."""
+    if os.path.isdir(output_path):
+        raise MeshFileError(f"{output_path}: is a directory; give the output file's name")
     same = os.path.realpath(input_path) == os.path.realpath(output_path)
     if not same and os.path.exists(output_path) and os.path.exists(input_path):
         same = os.path.samefile(input_path, output_path)

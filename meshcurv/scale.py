@@ -187,12 +187,12 @@ def select(results, radii, points, fallback=0, smooth=SMOOTH_NEIGHBORS, normal_v
     return choice.astype(np.int64)
 
 
-def assemble(results, choice, base=0):
-    """One CurvatureResult whose row i is row i of ``results[choice[i]]``, ``radius_used``
-    included (the chosen radius, or more where the sparse retry widened that row's ball; NaN
-    where not valid); the other attributes (``radius``, ``orientation``) are those of
-    ``results[base]``."""
-    rows = np.arange(len(choice))
+def assemble(results, choice, base=0, at=None):
+    """One CurvatureResult whose row i is row ``at[i]`` (default i) of ``results[choice[i]]``,
+    ``radius_used`` included (the chosen radius, or more where the sparse retry widened that
+    row's ball; NaN where not valid); the other attributes (``radius``, ``orientation``) are
+    those of ``results[base]``."""
+    rows = np.arange(len(choice)) if at is None else np.asarray(at)
     first = results[base]
     out = type(first)(**{f: getattr(first, f) for f in first.__dataclass_fields__})
     for name in ("k1", "k2", "d1", "d2", "normals", "valid", "n_neighbors", "n_samples",
@@ -245,15 +245,46 @@ def run_auto(v, f, given_normals, r0, query, plan, progress=False, radii=None,
     every row is such, the ladder's other radii are not run at all."""
     radii = ladder(r0) if radii is None else list(radii)
     at_r0 = int(np.argmin(np.abs(np.asarray(radii) - r0)))
-    base = run_radii(v, f, given_normals, [radii[at_r0]], query, plan, progress)[0]
+    # a part of the vertices is estimated with the neighbours its choice averages over, so
+    # that each of its rows is the row a run over every vertex gives
+    rows, at = _with_smoothing_neighbors(v, query, SMOOTH_NEIGHBORS)
+    base = run_radii(v, f, given_normals, [radii[at_r0]], rows, plan, progress)[0]
     keep = corrected_rows(base, plan)
     if keep.all() or len(radii) == 1:
-        return base
-    others = run_radii(v, f, given_normals, radii[:at_r0] + radii[at_r0 + 1:], query, plan,
+        return base if at is None else assemble([base], np.zeros(len(at), np.int64), at=at)
+    others = run_radii(v, f, given_normals, radii[:at_r0] + radii[at_r0 + 1:], rows, plan,
                        progress)
     results = others[:at_r0] + [base] + others[at_r0:]
-    choice = select(results, radii, v[query], fallback=at_r0,
-                    normal_var=_given_normal_variance(v, f, given_normals, r0, query, plan))
+    everything = np.arange(len(v), dtype=np.int64)
+    choice = select(results, radii, v[rows], fallback=at_r0,
+                    normal_var=_given_normal_variance(v, f, given_normals, r0, everything,
+                                                      plan))
     choice[keep] = at_r0
     # the default radius' own attributes: its radius and normal orientation note
-    return assemble(results, choice, base=at_r0)
+    if at is not None:
+        choice = choice[at]
+    return assemble(results, choice, base=at_r0, at=at)
+
+
+def _with_smoothing_neighbors(v, query, k):
+    """``(rows, at)``: the vertices ``rows`` (ascending) to estimate for the rows ``query`` of
+    ``v`` - the query and the ``k`` nearest finite vertices of each (whose error terms
+    :func:`select` averages) - and where each query row is in ``rows``; ``(query, None)``
+    where the query is every vertex in order."""
+    n = len(v)
+    if len(query) == n and np.array_equal(query, np.arange(n)):
+        return query, None
+    finite = np.flatnonzero(np.isfinite(v).all(axis=1))
+    wanted = query[np.isfinite(v[query]).all(axis=1)]
+    if len(finite) < 2 or len(wanted) == 0:
+        rows = np.unique(query)
+        return rows, np.searchsorted(rows, query)
+    p = v[finite]
+    s = power_of_two_scale(typical_extent(p))
+    with np.errstate(over="ignore"):
+        scaled = (lambda a: a * s) if s != 1.0 else (lambda a: a)
+        _, nb = cKDTree(scaled(p)).query(scaled(v[wanted]), min(k, len(finite)))
+    nb = np.asarray(nb).reshape(len(wanted), -1)
+    near = finite[nb[nb < len(finite)]]
+    rows = np.unique(np.concatenate([query, near]))
+    return rows, np.searchsorted(rows, query)

@@ -79,6 +79,25 @@ def test_auto_rows_equal_the_run_at_the_chosen_radius():
             np.testing.assert_array_equal(getattr(res, name)[rows], getattr(run, name)[rows])
 
 
+def test_auto_rows_of_a_query_equal_those_of_the_whole_run():
+    # each row's choice averages its nearest vertices' error terms: a query used to average
+    # over the queried rows only (radius_used 0.51 where the whole run chose 0.72)
+    p = surfaces.sphere(1.0, sampling="random", n=3000, seed=0).vertices
+    v = p + 0.003 * np.random.default_rng(0).standard_normal(p.shape)
+    full = meshcurv.principal_curvatures(v, radius="auto")
+    # rows of two chosen radii, one of them twice
+    values, counts = np.unique(full.radius_used[full.valid], return_counts=True)
+    common = values[np.argsort(counts)[-2:]]
+    q = np.concatenate([np.flatnonzero(full.radius_used == r)[[5, 0, 0, -1]] for r in common])
+    part = meshcurv.principal_curvatures(v, radius="auto", query=q)
+    for name in ("k1", "k2", "d1", "d2", "normals", "status", "radius_used", "noise"):
+        np.testing.assert_array_equal(getattr(part, name), getattr(full, name)[q], err_msg=name)
+    mask = np.zeros(len(v), dtype=bool)
+    mask[q] = True
+    part = meshcurv.principal_curvatures(v, radius="auto", query=mask)
+    np.testing.assert_array_equal(part.radius_used, full.radius_used[np.sort(np.unique(q))])
+
+
 def test_sparse_patch_gets_a_larger_ball():
     # a clean paraboloid sampled 16x more sparsely on one half: the default ball is widened
     # where it holds too few points (the sparse retry, 1.5x; the corrected default radius is

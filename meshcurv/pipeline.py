@@ -647,6 +647,8 @@ def _block_normals(nv, face_normals, idx, xb, indptr, indices, radius, search, p
         qb = pca_normals(search.points, xb, indptr, indices, radius, point_weights)
         if face_normals is not None:
             orient_like(qb, face_normals[idx])
+            # no plane fit (fewer than 3 points in the ball): the faces' normal
+            qb = np.where(np.isfinite(qb).all(axis=1)[:, None], qb, face_normals[idx])
             if face_weight is not None:
                 with np.errstate(invalid="ignore", divide="ignore"):
                     qb /= np.linalg.norm(qb, axis=1, keepdims=True)

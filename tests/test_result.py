@@ -29,6 +29,14 @@ def test_a_radius_below_the_spacing_leaves_too_few_half_sets():
     assert np.all(res.status == Status.TOO_FEW_HALF_SETS)
 
 
+def test_a_mesh_radius_below_its_edges_leaves_too_few_neighbors_with_the_faces_normals():
+    # no point within the ball: the plane fit has none, and the rows were NO_NORMAL with NaN
+    # normals although the faces give one
+    res = meshcurv.principal_curvatures(SPHERE.vertices, SPHERE.faces, radius=1e-4)
+    assert np.all(res.status == Status.TOO_FEW_NEIGHBORS)
+    assert np.einsum("ij,ij->i", res.normals, SPHERE.normals).min() > 0.99
+
+
 def test_no_position_no_normal_and_an_isolated_point():
     v = np.vstack([SPHERE.vertices, [[np.nan] * 3, [5.0, 5, 5], [0.0, 0, 1.02]]])
     nv = np.vstack([SPHERE.normals, [UP, UP, [0.0, 0, 0]]])

@@ -15,9 +15,10 @@ def as_arrays(vertices, faces=None, normals=None):
     shapes, non-integer faces and face indices out of range.
     """
     if hasattr(vertices, "geometry") and hasattr(vertices, "graph"):
-        raise ValueError(f"a trimesh.Scene holds {len(vertices.geometry)} geometries, not one "
-                         f"surface: pass scene.to_geometry() (one mesh, transforms applied) or "
-                         f"one of scene.geometry.values()")
+        count = len(vertices.geometry)
+        raise ValueError(f"a trimesh.Scene is no one surface (it holds {count} "
+                         f"geometr{'y' if count == 1 else 'ies'}): pass scene.to_geometry() "
+                         f"(one mesh, transforms applied) or one of scene.geometry.values()")
     if hasattr(vertices, "vertices") and hasattr(vertices, "faces"):
         if faces is None:
             faces = vertices.faces

@@ -20,9 +20,12 @@ def test_trimesh_point_cloud_is_its_points():
 
 def test_trimesh_scene_refused_in_one_line():
     scene = trimesh.Scene([trimesh.creation.icosphere(2), trimesh.creation.box()])
-    with pytest.raises(ValueError, match=r"trimesh.Scene holds 2 geometries.*to_geometry") as e:
+    with pytest.raises(ValueError, match=r"is no one surface \(it holds 2 geometries\).*"
+                                         r"to_geometry") as e:
         meshcurv.principal_curvatures(scene)
     assert "\n" not in str(e.value)
+    with pytest.raises(ValueError, match=r"\(it holds 1 geometry\)"):
+        meshcurv.principal_curvatures(trimesh.Scene([trimesh.creation.icosphere(2)]))
 
 
 def test_no_faces_is_a_point_cloud():

@@ -96,3 +96,40 @@ def test_ball_mean_averages_the_entries_inside_the_ball_as_numpy_does():
             if r2max == 0.3 and w is not None:
                 assert np.any((total == 0) & (np.bincount(owner[inside],
                                                           minlength=len(centres)) > 0))
+
+
+def _thinned_spec(full, cap):
+    """Plain numpy: ``cap`` entries of the list ``full`` at positions (j * len) // cap."""
+    full = np.asarray(full)
+    if cap <= 0 or len(full) <= cap:
+        return full
+    return full[(np.arange(cap) * len(full)) // cap]
+
+
+def test_capped_ball_lists_keep_evenly_spread_entries_as_numpy_does():
+    """A dense clump in a sparse cloud, with the sampled queries in the sparse part: the
+    clump's lists overflow their scratch and are searched again, the others fit; every list
+    longer than the cap keeps the entries the numpy rule picks, in both orders."""
+    rng = np.random.default_rng(4)
+    sparse = rng.uniform(-1.0, 1.0, (3000, 3))
+    clump = rng.normal(scale=0.02, size=(1500, 3))
+    points = np.concatenate([sparse, clump])
+    grid = ball_grid(points, 0.15)
+    query = clump[:640].copy()
+    sampled = np.arange(0, 640, 640 // 64)           # the queries that size the scratch
+    query[sampled] = sparse[sampled] + [5.0, 0.0, 0.0]  # far from everything: empty balls
+    query[::3] = sparse[:640:3]
+    for ascending in (True, False):
+        for positions in (True, False):
+            full = ball_neighbors(grid, None, query, 0.15, ascending, positions)
+            for cap in (0, 7, 400):
+                indptr, indices = ball_neighbors(grid, None, query, 0.15, ascending, positions,
+                                                 cap=cap)
+                for q in range(len(query)):
+                    expected = _thinned_spec(full[1][full[0][q]:full[0][q + 1]], cap)
+                    np.testing.assert_array_equal(indices[indptr[q]:indptr[q + 1]], expected)
+    lengths = np.diff(ball_neighbors(grid, None, query, 0.15)[0])
+    assert (lengths > 400).sum() > 300 and (lengths < 7).sum() > 100   # every kind of list
+    from meshcurv.neighbors import ball_counts
+    np.testing.assert_array_equal(ball_counts(grid, query, 0.15, cap=400),
+                                  np.minimum(lengths, 400))

@@ -45,7 +45,8 @@ from ..neighbors import grid
 __all__ = ["orient_like", "orient_towards", "orient_along", "orient_mst", "piece_signs",
            "sample_areas", "nearest_areas",
            "orientation_note", "CLOSED_MEAN_NORMAL", "SIDEWAYS_MEAN_NORMAL_Z", "PIECE_RULES",
-           "nearest_in_lists", "orient_spanning_tree"]
+           "nearest_in_lists", "orient_spanning_tree", "graph_pieces",
+           "nearest_in_other_piece"]
 
 # A connected piece whose mean unit normal |sum n| / count is shorter than this is closed:
 # halfway (in ratio) between a closed cloud's sampling error (~1 / sqrt(n), 0.01 at 10k
@@ -339,6 +340,50 @@ def nearest_in_lists(points, query_points, indptr, indices, k):
                 best[s] = dd
                 out[q, s] = i
                 have = min(have + 1, k)
+    return out
+
+
+@njit(cache=True)
+def graph_pieces(neighbors):
+    """(n,) int64 label of each point's connected piece of the graph ``neighbors`` ((n, k)
+    int, -1 for none; edges undirected): the lowest point index in the piece."""
+    n, k = neighbors.shape
+    parent = np.arange(n)
+    for i in range(n):
+        for a in range(k):
+            j = neighbors[i, a]
+            if j >= 0:
+                ri = _find_root(parent, i)
+                rj = _find_root(parent, j)
+                if ri != rj:
+                    parent[max(ri, rj)] = min(ri, rj)
+    labels = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        labels[i] = _find_root(parent, i)
+    return labels
+
+
+@njit(parallel=True, cache=True)
+def nearest_in_other_piece(points, query_points, indptr, indices, vertex, labels, own):
+    """For each query point, the vertex (``vertex[j]`` of list entry j, an index into
+    ``labels``) nearest to it in its CSR list whose piece ``labels[...]`` differs from the
+    query's ``own[q]``; -1 where the list holds none. Points coinciding with the query point
+    are left out (as :func:`nearest_in_lists` does). Returns (m,) int32."""
+    m = query_points.shape[0]
+    out = np.full(m, -1, dtype=np.int32)
+    for q in prange(m):
+        best = np.inf
+        for e in range(indptr[q], indptr[q + 1]):
+            i = indices[e]
+            if labels[vertex[i]] == own[q]:
+                continue
+            d0 = points[i, 0] - query_points[q, 0]
+            d1 = points[i, 1] - query_points[q, 1]
+            d2 = points[i, 2] - query_points[q, 2]
+            dd = d0 * d0 + d1 * d1 + d2 * d2
+            if dd > 0.0 and dd < best:
+                best = dd
+                out[q] = vertex[i]
     return out
 
 

@@ -3,7 +3,7 @@ coordinate rows parsed with the row that fails named."""
 
 import numpy as np
 
-__all__ = ["triangulate", "read_text", "parse_coordinates"]
+__all__ = ["triangulate", "read_text", "parse_coordinates", "is_number"]
 
 
 def triangulate(polygons):
@@ -45,3 +45,12 @@ def parse_coordinates(rows, what):
                 raise ValueError(f"{what} {k + 1}: {' '.join(r[:3])!r} is not three "
                                  f"numbers") from None
         raise
+
+
+def is_number(token):
+    """Whether ``token`` (str or bytes) parses as a float."""
+    try:
+        float(token)
+    except ValueError:
+        return False
+    return True

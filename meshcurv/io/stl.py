@@ -8,6 +8,7 @@ import numpy as np
 
 from ..weld import coincident_vertices
 from .data import MeshData, MeshFileError
+from .parse import is_number
 
 __all__ = ["read_stl", "readers"]
 
@@ -46,18 +47,9 @@ def _stl_corners(raw):
     try:
         return np.array(corners, dtype=np.float64).reshape(-1, 3)
     except ValueError:
-        bad = next(t for c in corners for t in c if not _is_number(t))
+        bad = next(t for c in corners for t in c if not is_number(t))
         raise ValueError(f"ASCII vertex coordinate {bad[:20].decode('latin-1')!r} is not "
                          "a number") from None
-
-
-def _is_number(token):
-    """Whether the bytes ``token`` parse as a float."""
-    try:
-        float(token)
-    except ValueError:
-        return False
-    return True
 
 
 def _merge_exact(vertices, faces):

@@ -5,7 +5,7 @@ from collections import Counter
 import numpy as np
 
 from .data import MeshData
-from .parse import read_text
+from .parse import is_number, read_text
 
 __all__ = ["read_xyz", "readers"]
 
@@ -28,7 +28,7 @@ def read_xyz(path):
         text = text[len(_UTF8_BOM):]
     lines = [ln.split("#", 1)[0].replace(",", " ").split() for ln in text.splitlines()]
     lines = [ln for ln in lines if ln]
-    if lines and not any(_is_number(t) for t in lines[0]):
+    if lines and not any(is_number(t) for t in lines[0]):
         lines = lines[1:]
     if lines and len(lines[0]) == 1 and lines[0][0].isdigit():
         declared = int(lines[0][0])
@@ -65,14 +65,6 @@ def read_xyz(path):
             for i, c in enumerate(("red", "green", "blue")):
                 data.fields[c] = table[:, 4 + i]
     return data
-
-
-def _is_number(token):
-    try:
-        float(token)
-    except ValueError:
-        return False
-    return True
 
 
 def _colours(triple):

@@ -91,7 +91,7 @@ def check_options(**options):
     for name, low, high in _RANGES:
         if name in options:
             _check_in_range(name, options[name], low, high)
-    if "min_points" in options and float(options["min_points"]) != int(options["min_points"]):
+    if "min_points" in options and not float(options["min_points"]).is_integer():
         raise ValueError(f"min_points must be a whole number, got {options['min_points']!r}")
     orientation = options.get("orientation", "mst")
     if isinstance(orientation, str) and orientation in ORIENTATIONS:

@@ -279,11 +279,13 @@ def _with_smoothing_neighbors(v, query, k):
     if len(finite) < 2 or len(wanted) == 0:
         rows = np.unique(query)
         return rows, np.searchsorted(rows, query)
-    p = v[finite]
+    p, q = v[finite], v[wanted]
     s = power_of_two_scale(typical_extent(p))
-    with np.errstate(over="ignore"):
-        scaled = (lambda a: a * s) if s != 1.0 else (lambda a: a)
-        _, nb = cKDTree(scaled(p)).query(scaled(v[wanted]), min(k, len(finite)))
+    if s != 1.0:
+        # as :func:`_smoothed` measures the distances: squares that would overflow, scaled
+        with np.errstate(over="ignore"):
+            p, q = p * s, q * s
+    _, nb = cKDTree(p).query(q, min(k, len(finite)))
     nb = np.asarray(nb).reshape(len(wanted), -1)
     near = finite[nb[nb < len(finite)]]
     rows = np.unique(np.concatenate([query, near]))

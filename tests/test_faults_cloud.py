@@ -279,7 +279,8 @@ def test_n_directions_at_the_bounds_is_accepted():
 @pytest.mark.parametrize("name, bad", [("slab", 0), ("slab", -0.1), ("slab", float("nan")),
                                        ("slab", "wide"), ("slab", 5), ("min_points", -5),
                                        ("min_points", 2.5), ("min_spread", float("nan")),
-                                       ("min_spread", 1.5), ("min_spread", True)])
+                                       ("min_spread", 1.5), ("min_spread", True),
+                                       ("min_points", float("inf"))])
 def test_slab_and_half_set_limits_out_of_range_are_refused_in_one_line(name, bad):
     # a slab of width 0 left every row TOO_FEW_HALF_SETS and one of 5 radii every row
     # DEGENERATE_DIRECTIONS, silently; 'wide' failed inside float()

@@ -562,7 +562,8 @@ def cell_ball_csr(order, sorted_points, cell_start, grid_base, cell, dims, table
                               r2max, dummy, 0, 0, False, False, win0)
         cnt += 1
     limit = cap if cap > 0 else np.iinfo(np.int64).max
-    tot = min(tot, limit * cnt)
+    if cap > 0:
+        tot = min(tot, cap * cnt)
     room = stream_capacity(tot, cnt)
     buf = np.empty(nthreads * per * room, dtype=np.int64)
     used = np.zeros(nthreads, dtype=np.int64)

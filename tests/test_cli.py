@@ -350,6 +350,9 @@ def las_file(tmp_path_factory):
     header.offsets = [0.0, 0.0, 0.0]
     las = laspy.LasData(header)
     las.x, las.y, las.z = xy[:, 0], xy[:, 1], 0.3 * (xy ** 2).sum(axis=1)
+    las.intensity = rng.integers(0, 65535, 3000).astype(np.uint16)
+    las.classification = rng.integers(0, 20, 3000).astype(np.uint8)
+    las.gps_time = rng.uniform(0.0, 1e6, 3000)
     path = tmp_path_factory.mktemp("las") / "para.las"
     las.write(str(path))
     return path
@@ -373,6 +376,14 @@ def test_las_input_annotates_in_memory_to_las_and_ply(tmp_path, capsys, las_file
                        "--radius", "0.25")
     assert code == 0, err
     assert _bits(io.read(str(tmp_path / "para.ply")).fields["k1"]) == _bits(res.k1)
+    # the points' own attributes come along, by CloudCompare's spelling of a scalar field
+    from plyfile import PlyData
+    vertex = PlyData.read(str(tmp_path / "para.ply"))["vertex"]
+    src = laspy.read(str(las_file))
+    for name in ("intensity", "classification", "gps_time", "return_number", "red"):
+        got = vertex["scalar_" + name]
+        assert got.dtype == np.asarray(src[name]).dtype, name
+        np.testing.assert_array_equal(got, np.asarray(src[name]), err_msg=name)
 
 
 def test_tiling_flags_reach_annotate_tiled(tmp_path, capsys, las_file, monkeypatch,

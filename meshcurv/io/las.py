@@ -62,6 +62,8 @@ __all__ = ["LasReadError", "CURVATURE_FIELDS", "NORMAL_FIELDS", "NAME_LIMIT", "D
 
 
 NORMAL_FIELDS = ("NormalX", "NormalY", "NormalZ")
+# Prefix of the other dimensions of a LAS/LAZ input in its fields (:func:`read_las_cloud`).
+PLY_CARRY_PREFIX = "scalar_"
 _DESCRIPTIONS = {
     "k1": "max principal curvature", "k2": "min principal curvature",
     "mean": "mean curvature", "gaussian": "Gaussian curvature",
@@ -290,7 +292,7 @@ def read_las_points(path, chunk_size=DEFAULT_CHUNK):
     return xyz, nv
 
 
-def read_las_cloud(path, chunk_size=DEFAULT_CHUNK, fields=CURVATURE_FIELDS):
+def read_las_cloud(path, chunk_size=DEFAULT_CHUNK, fields=CURVATURE_FIELDS, carry=False):
     """All points of a LAS/LAZ file in memory, with the extra dimensions named in ``fields``
     (also with a radius suffix: ``k1`` finds ``k1_r0p5`` too).
 
@@ -299,14 +301,26 @@ def read_las_cloud(path, chunk_size=DEFAULT_CHUNK, fields=CURVATURE_FIELDS):
     xyz : (n, 3) float64, model units, file order
     normals : (n, 3) float64 or None, when the file has normal dimensions
     found : dict name -> (n,) array, the dimensions of ``fields`` the file has (e.g. the
-        curvature fields of an annotated file), in their stored type
+        curvature fields of an annotated file), in their stored type; with ``carry`` also
+        each other dimension a PLY property can hold (one value of 8 to 32 bits or a double:
+        intensity, classification, return numbers, GPS time, RGB, extra bytes), as
+        ``scalar_<name>`` (the spelling CloudCompare loads as a scalar field)
     """
     with open_las(path) as reader:
-        names = list(reader.header.point_format.extra_dimension_names)
+        point_format = reader.header.point_format
+    names = list(point_format.extra_dimension_names)
     have = {n.lower(): n for n in names}
     wanted = {f: have[f.lower()] for f in fields if f.lower() in have}
     wanted.update({n: n for n in names if split_radius_suffix(n)[1]
                    and split_radius_suffix(n)[0] in fields and n not in wanted})
+    if carry:
+        skip = {"x", "y", "z"} | {n.lower() for n in (normal_dims(point_format) or ())}
+        skip |= {w.lower() for w in wanted.values()}
+        wanted.update({PLY_CARRY_PREFIX + d.name: d.name for d in point_format.dimensions
+                       if d.name.lower() not in skip and d.num_elements == 1
+                       and np.dtype(d.dtype).kind in "iuf"
+                       and np.dtype(d.dtype).itemsize in ((1, 2, 4, 8) if np.dtype(
+                           d.dtype).kind == "f" else (1, 2, 4))})
     xyz, nv, found = [], [], {f: [] for f in wanted}
     for _, p, n, rec in iter_las_chunks(path, chunk_size, with_records=True):
         xyz.append(p)
@@ -474,12 +488,14 @@ def read_las(path):
     ``vertices`` are the scaled x, y, z ((n, 3) float64, model units); ``normals`` come from
     NormalX..NormalZ (or nx.., normal_x..) extra dimensions when the file has them; ``fields``
     holds the :data:`CURVATURE_FIELDS` extra dimensions of an annotated file (also those of
-    each radius, ``k1_r0p5``, see :func:`write_las_curvature`). Clouds larger
+    each radius, ``k1_r0p5``, see :func:`write_las_curvature`) and the file's other
+    dimensions as ``scalar_<name>`` (``scalar_intensity``, ``scalar_classification`` ...: an
+    annotated PLY written from it carries them). Clouds larger
     than memory go through :func:`meshcurv.tiled.annotate_tiled` instead.
     """
     require_laspy(path)
     try:
-        xyz, normals, fields = read_las_cloud(path, fields=CURVATURE_FIELDS)
+        xyz, normals, fields = read_las_cloud(path, fields=CURVATURE_FIELDS, carry=True)
     except LasReadError as exc:  # its message already names the file
         raise MeshFileError(first_line(exc)) from exc
     return MeshData(vertices=xyz, normals=normals, fields=fields, path=path)

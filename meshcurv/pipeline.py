@@ -114,12 +114,6 @@ TREE_NEIGHBORS = 10
 # Most rounds of joining the pieces of that graph (:func:`bridged_graph`).
 BRIDGE_ROUNDS = 4
 
-# Ball lists keep at most CAP_FACTOR times the median ball's count (CAP_SAMPLE points sampled),
-# and never fewer than CAP_FLOOR points (:func:`neighbor_cap`).
-CAP_FACTOR = 8
-CAP_FLOOR = 1000
-CAP_SAMPLE = 1024
-
 # Radius, as a multiple of the call's, of the plane fits that give a point cloud's estimated
 # normals to the normal-aware circle fits (a neighbor's normal row). Those rows count where
 # the positions are noisy (their weight is 1 - the noise blend), and there a plane fit's
@@ -357,34 +351,19 @@ def ball_search(v, finite, radius):
     if tree is None and len(finite):
         tree = cKDTree(v[finite])
     in_grid = isinstance(tree, BallGrid)
-    cap = neighbor_cap(tree, v, finite, radius) if in_grid else 0
 
     def neighbors(idx):
         if tree is None:
             return np.zeros(len(idx) + 1, dtype=np.int64), np.zeros(0, dtype=np.int64)
-        return ball_neighbors(tree, finite, v[idx], radius, ascending=False, positions=in_grid,
-                              cap=cap)
+        return ball_neighbors(tree, finite, v[idx], radius, ascending=False, positions=in_grid)
 
     def counts(idx):
         if tree is None:
             return np.zeros(len(idx), dtype=np.int64)
-        return ball_counts(tree, v[idx], radius, cap)
+        return ball_counts(tree, v[idx], radius)
 
     return Search(neighbors, counts, tree.sorted_points if in_grid else v,
                   tree.order if in_grid else None, None, radius)
-
-
-def neighbor_cap(grid, v, finite, radius):
-    """Most points a ball list of ``radius`` keeps (:func:`meshcurv.neighbors.ball_neighbors`'
-    ``cap``): ``CAP_FACTOR`` times the median count over a sample of the ``finite`` rows of
-    ``v`` (every ``len(finite) // CAP_SAMPLE``-th), at least ``CAP_FLOOR``. A dense clump (a
-    scanner's near field) would otherwise cost the square of its size: each of its points'
-    balls holds all of it (8000 points in a 0.01-wide square of a 40k-point bowl: 48 s and
-    1.07 GB peak, 7.5 s and 0.72 GB with the cap, as accurate); its lists keep that many
-    points, spread evenly over them."""
-    sample = finite[::max(1, len(finite) // CAP_SAMPLE)]
-    typical = float(np.median(ball_counts(grid, v[sample], radius))) if len(sample) else 0.0
-    return int(max(CAP_FLOOR, CAP_FACTOR * typical))
 
 
 def kring_search(v, f, radius, adjacency=None):

@@ -239,27 +239,6 @@ def test_reference_refuses_a_fan_rim_as_the_kernel_does():
             assert np.isnan(out["k1"])
 
 
-def test_a_dense_clump_keeps_at_most_the_cap_of_neighbours_and_its_accuracy():
-    # 3000 points in a 0.01-wide square of a 20k-point bowl: each of their balls held the
-    # whole clump, so the run cost the square of its size (8000 points: 54 s against 7 s
-    # now); the lists keep CAP_FLOOR points spread evenly over the ball
-    rng = np.random.default_rng(0)
-    xy = np.concatenate([rng.uniform(-1, 1, (20000, 2)), rng.uniform(0, 0.01, (3000, 2))])
-    v = np.column_stack([xy, 0.1 * xy[:, 0] ** 2])
-    res = meshcurv.principal_curvatures(v)
-    clump = np.arange(len(v)) >= 20000
-    # (the point itself among the entries, or not)
-    assert pipeline.CAP_FLOOR - 1 <= res.n_neighbors[clump].min() <= res.n_neighbors.max() \
-        <= pipeline.CAP_FLOOR
-    k = 0.2 / (1 + (0.2 * v[:, 0]) ** 2) ** 1.5       # the bowl's curvature along x
-    inner = np.abs(xy).max(axis=1) < 1 - res.radius
-    assert res.valid[inner].all()
-    # seen from above the bowl is concave: k2 = -k, k1 = 0 (the plane's 1e-5 with or without
-    # the clump; the clump's 6e-7 before the cap)
-    assert np.abs(res.k2 + k)[clump].mean() < 1e-5 and np.abs(res.k1)[clump].mean() < 1e-5
-    assert np.abs(res.k2 + k)[inner].mean() < 3e-5
-
-
 # ------------------------------------------------------------------ n_directions
 
 @pytest.mark.parametrize("bad", [2, 65, 100000, 8.5, "x", None, float("nan")])

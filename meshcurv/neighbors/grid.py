@@ -90,8 +90,7 @@ def ball_grid(points, radius):
     return BallGrid(radius, zero, cell, order, sorted_points, cell_start, zero, keys, table)
 
 
-def ball_neighbors(tree, finite_index, query_points, radius, ascending=True, positions=False,
-                   cap=0):
+def ball_neighbors(tree, finite_index, query_points, radius, ascending=True, positions=False):
     """All points within ``radius`` of each query point (the query point itself included).
 
     Parameters
@@ -110,9 +109,6 @@ def ball_neighbors(tree, finite_index, query_points, radius, ascending=True, pos
         neighbors' coordinates from ``tree.sorted_points`` then find them close together in
         memory, which on a large cloud in random order is several times faster. Ignored (vertex
         indices) with a cKDTree.
-    cap : int, default 0 (none)
-        With a grid: a list of more points keeps ``cap`` of them, evenly spread over it in its
-        order (:func:`thin_evenly`). Ignored with a cKDTree.
 
     Returns
     -------
@@ -127,7 +123,7 @@ def ball_neighbors(tree, finite_index, query_points, radius, ascending=True, pos
         return cell_ball_csr(tree.order, tree.sorted_points, tree.cell_start,
                                      tree.base, tree.cell, tree.dims, tree.table_keys,
                                      tree.table_cells, q, tree.radius, numba.get_num_threads(),
-                                     bool(ascending), bool(positions), int(cap))
+                                     bool(ascending), bool(positions))
     ok = np.isfinite(query_points).all(axis=1)
     lists = np.empty(len(query_points), dtype=object)
     lists[:] = [[] for _ in range(len(query_points))]
@@ -140,16 +136,14 @@ def ball_neighbors(tree, finite_index, query_points, radius, ascending=True, pos
     return indptr, finite_index[flat]
 
 
-def ball_counts(tree, query_points, radius, cap=0):
-    """(m,) int64 number of points :func:`ball_neighbors` would list for each query point
-    (with the same ``cap``), without storing the lists (to size the work first). ``tree`` as
-    there."""
+def ball_counts(tree, query_points, radius):
+    """(m,) int64 number of points :func:`ball_neighbors` would list for each query point,
+    without storing the lists (to size the work first). ``tree`` as there."""
     q = np.ascontiguousarray(query_points, dtype=np.float64)
     if isinstance(tree, BallGrid):
-        counts = cell_ball_counts(tree.order, tree.sorted_points, tree.cell_start,
-                                  tree.base, tree.cell, tree.dims, tree.table_keys,
-                                  tree.table_cells, q, tree.radius)
-        return np.minimum(counts, cap) if cap > 0 else counts
+        return cell_ball_counts(tree.order, tree.sorted_points, tree.cell_start,
+                                        tree.base, tree.cell, tree.dims, tree.table_keys,
+                                        tree.table_cells, q, tree.radius)
     out = np.zeros(len(q), dtype=np.int64)
     ok = np.isfinite(q).all(axis=1)
     if ok.any():
@@ -522,24 +516,14 @@ def cell_ball_counts(order, sorted_points, cell_start, grid_base, cell, dims, ta
     return counts
 
 
-@njit(cache=True)
-def thin_evenly(a, lo, found, cap):
-    """Keep ``cap`` of the ``found`` entries ``a[lo:lo + found]``, evenly spread over them (the
-    entries at ``(j * found) // cap``, j = 0 .. cap - 1), in ``a[lo:lo + cap]``, in order."""
-    for j in range(cap):
-        a[lo + j] = a[lo + (j * found) // cap]
-
-
 @njit(parallel=True, cache=True)
 def cell_ball_csr(order, sorted_points, cell_start, grid_base, cell, dims, table_keys,
-                  table_cells, query_points, radius, nthreads, ascending, positions, cap=0):
+                  table_cells, query_points, radius, nthreads, ascending, positions):
     """All grid points within ``radius`` of each query point, CSR.
 
     Each list is ascending with ``ascending``, else in grid order (cheaper; for consumers that
     do not depend on the order). With ``positions`` the lists hold rows of ``sorted_points``
-    (whose neighborhoods then lie close together in memory) instead of point indices. With
-    ``cap`` > 0 a list of more points keeps ``cap`` of them, evenly spread over it
-    (:func:`thin_evenly`).
+    (whose neighborhoods then lie close together in memory) instead of point indices.
 
     The grid comes from :func:`dense_grid_build` (``table_keys`` empty; ``grid_base`` and
     ``dims`` its block of cells) or :func:`hashed_grid_build` (``grid_base``, ``dims`` unused),
@@ -561,53 +545,29 @@ def cell_ball_csr(order, sorted_points, cell_start, grid_base, cell, dims, table
                               query_points[qi, 0], query_points[qi, 1], query_points[qi, 2],
                               r2max, dummy, 0, 0, False, False, win0)
         cnt += 1
-    limit = cap if cap > 0 else np.iinfo(np.int64).max
-    if cap > 0:
-        tot = min(tot, cap * cnt)
-    room = stream_capacity(tot, cnt)
-    buf = np.empty(nthreads * per * room, dtype=np.int64)
+    cap = stream_capacity(tot, cnt)
+    buf = np.empty(nthreads * per * cap, dtype=np.int64)
     used = np.zeros(nthreads, dtype=np.int64)
     for t in prange(nthreads):
         win = np.empty((3, WINDOW), dtype=np.int64)
-        lo = t * per * room
-        end = lo + per * room
+        lo = t * per * cap
         pos = lo
         for qi in range(t * per, min(m, (t + 1) * per)):
             f = _cell_ball_one(order, sorted_points, cell_start, grid_base, cell, dims,
                                table_keys, table_cells,
                                query_points[qi, 0], query_points[qi, 1], query_points[qi, 2],
-                               r2max, buf, pos, end, ascending, positions, win)
-            kept = min(f, limit)
-            counts[qi + 1] = kept
-            if pos + f > end:
-                pos += f          # did not fit: the thread's range is searched again below
-            else:
-                if f > kept:
-                    thin_evenly(buf, pos, f, kept)
-                pos += kept
+                               r2max, buf, pos, lo + per * cap, ascending, positions, win)
+            counts[qi + 1] = f
+            pos += f
         used[t] = pos - lo
-    indices = gather_streams(counts, buf, used, nthreads, per, room)
+    indices = gather_streams(counts, buf, used, nthreads, per, cap)
     for t in prange(nthreads):
-        if overflowed(used, t, per, room):
+        if overflowed(used, t, per, cap):
             win = np.empty((3, WINDOW), dtype=np.int64)
-            scratch = np.empty(0, dtype=np.int64)
             for qi in range(t * per, min(m, (t + 1) * per)):
-                x0, x1, x2 = query_points[qi, 0], query_points[qi, 1], query_points[qi, 2]
-                lo, kept = counts[qi], counts[qi + 1] - counts[qi]
-                if kept < limit:        # the whole list
-                    _cell_ball_one(order, sorted_points, cell_start, grid_base, cell, dims,
-                                   table_keys, table_cells, x0, x1, x2, r2max, indices, lo,
-                                   lo + kept, ascending, positions, win)
-                    continue
-                f = _cell_ball_one(order, sorted_points, cell_start, grid_base, cell, dims,
-                                   table_keys, table_cells, x0, x1, x2, r2max, scratch, 0,
-                                   scratch.shape[0], ascending, positions, win)
-                if f > scratch.shape[0]:
-                    scratch = np.empty(f, dtype=np.int64)
-                    _cell_ball_one(order, sorted_points, cell_start, grid_base, cell, dims,
-                                   table_keys, table_cells, x0, x1, x2, r2max, scratch, 0,
-                                   f, ascending, positions, win)
-                thin_evenly(scratch, 0, f, kept)
-                for j in range(kept):
-                    indices[lo + j] = scratch[j]
+                _cell_ball_one(order, sorted_points, cell_start, grid_base, cell, dims,
+                               table_keys, table_cells,
+                               query_points[qi, 0], query_points[qi, 1], query_points[qi, 2],
+                               r2max, indices, counts[qi], counts[qi + 1],
+                               ascending, positions, win)
     return counts, indices

@@ -53,7 +53,7 @@ def _check_in_range(name, value, low, high):
     except (TypeError, ValueError):
         x = np.nan
     above = x > low if name == "slab" else x >= low
-    if isinstance(value, (bool, np.bool_)) or not (above and x <= high):
+    if isinstance(value, (bool, np.bool_, str)) or not (above and x <= high):
         side = "(" if name == "slab" else "["
         raise ValueError(f"{name} must be a number in {side}{low:g}, {high:g}], got {value!r}")
 

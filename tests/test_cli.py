@@ -353,6 +353,8 @@ def las_file(tmp_path_factory):
     las.intensity = rng.integers(0, 65535, 3000).astype(np.uint16)
     las.classification = rng.integers(0, 20, 3000).astype(np.uint8)
     las.gps_time = rng.uniform(0.0, 1e6, 3000)
+    las.add_extra_dim(laspy.ExtraBytesParams(name="amp dB", type=np.float32))
+    las["amp dB"] = rng.normal(size=3000).astype(np.float32)
     path = tmp_path_factory.mktemp("las") / "para.las"
     las.write(str(path))
     return path
@@ -380,8 +382,8 @@ def test_las_input_annotates_in_memory_to_las_and_ply(tmp_path, capsys, las_file
     from plyfile import PlyData
     vertex = PlyData.read(str(tmp_path / "para.ply"))["vertex"]
     src = laspy.read(str(las_file))
-    for name in ("intensity", "classification", "gps_time", "return_number", "red"):
-        got = vertex["scalar_" + name]
+    for name in ("intensity", "classification", "gps_time", "return_number", "red", "amp dB"):
+        got = vertex["scalar_" + name.replace(" ", "_")]    # no whitespace in a PLY name
         assert got.dtype == np.asarray(src[name]).dtype, name
         np.testing.assert_array_equal(got, np.asarray(src[name]), err_msg=name)
 

@@ -259,7 +259,7 @@ def test_n_directions_at_the_bounds_is_accepted():
                                        ("slab", "wide"), ("slab", 5), ("min_points", -5),
                                        ("min_points", 2.5), ("min_spread", float("nan")),
                                        ("min_spread", 1.5), ("min_spread", True),
-                                       ("min_points", float("inf"))])
+                                       ("min_points", float("inf")), ("min_points", "5")])
 def test_slab_and_half_set_limits_out_of_range_are_refused_in_one_line(name, bad):
     # a slab of width 0 left every row TOO_FEW_HALF_SETS and one of 5 radii every row
     # DEGENERATE_DIRECTIONS, silently; 'wide' failed inside float()

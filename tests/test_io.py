@@ -61,6 +61,7 @@ def test_xyz_as_cloudcompare_and_windows_tools_write_it(tmp_path):
         "rgb.xyz": (rows(v, rgb), None, rgb),
         "header.xyz": ("//X Y Z R G B Nx Ny Nz\n" + rows(v, rgb, n), n, rgb),
         "normals_first.xyz": (rows(v, n, rgb), n, rgb),
+        "float_colours.xyz": (rows(v, rgb / 255.0, n), n, rgb / 255.0),
         "bom.xyz": ("\ufeff# Scan von M\u00fcller\n" + rows(v, n), n, None),
         "bom_only.xyz": ("\ufeff" + rows(v, n), n, None),
     }
@@ -76,6 +77,10 @@ def test_xyz_as_cloudcompare_and_windows_tools_write_it(tmp_path):
         if colours is not None:
             got = np.column_stack([data.fields[c] for c in ("red", "green", "blue")])
             np.testing.assert_array_equal(got, colours, err_msg=name)
+    # 9 columns where neither triple tells itself apart (no 0-255 colours, no unit normals)
+    (tmp_path / "ambiguous.xyz").write_text(rows(v, rgb / 255.0, 2 * n))
+    with pytest.raises(io.MeshFileError, match="neither x y z r g b nx ny nz"):
+        io.read(str(tmp_path / "ambiguous.xyz"))
     # axis-aligned unit normals are whole numbers too: still normals
     axes = np.tile([0.0, 0.0, 1.0], (50, 1))
     (tmp_path / "axes.xyz").write_text(rows(v, axes))

@@ -46,6 +46,7 @@ is written whatever the version, as laspy does.
 
 import copy
 import os
+import re
 
 import numpy as np
 
@@ -304,7 +305,8 @@ def read_las_cloud(path, chunk_size=DEFAULT_CHUNK, fields=CURVATURE_FIELDS, carr
         curvature fields of an annotated file), in their stored type; with ``carry`` also
         each other dimension a PLY property can hold (one value of 8 to 32 bits or a double:
         intensity, classification, return numbers, GPS time, RGB, extra bytes), as
-        ``scalar_<name>`` (the spelling CloudCompare loads as a scalar field)
+        ``scalar_<name>`` (the spelling CloudCompare loads as a scalar field; whitespace in a
+        name, which a PLY property cannot hold, as ``_``)
     """
     with open_las(path) as reader:
         point_format = reader.header.point_format
@@ -316,7 +318,8 @@ def read_las_cloud(path, chunk_size=DEFAULT_CHUNK, fields=CURVATURE_FIELDS, carr
     if carry:
         skip = {"x", "y", "z"} | {n.lower() for n in (normal_dims(point_format) or ())}
         skip |= {w.lower() for w in wanted.values()}
-        wanted.update({PLY_CARRY_PREFIX + d.name: d.name for d in point_format.dimensions
+        wanted.update({PLY_CARRY_PREFIX + re.sub(r"\s", "_", d.name): d.name
+                       for d in point_format.dimensions
                        if d.name.lower() not in skip and d.num_elements == 1
                        and np.dtype(d.dtype).kind in "iuf"
                        and np.dtype(d.dtype).itemsize in ((1, 2, 4, 8) if np.dtype(

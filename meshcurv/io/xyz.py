@@ -18,7 +18,8 @@ def read_xyz(path):
 
     Columns: 3 = ``x y z``; 6 = ``x y z nx ny nz``, or ``x y z r g b`` where those three are
     whole numbers 0-255 (CloudCompare's export of a coloured cloud); 9 = ``x y z r g b nx ny
-    nz`` (the colours the whole-number triple, in either order); 4 or 7 = ``x y z intensity
+    nz`` in either order (the colours the whole-number triple 0-255, else the one that is not
+    of unit length); 4 or 7 = ``x y z intensity
     [r g b]`` (Leica PTS). Colours and intensity are kept in ``fields``. A first line holding a
     single integer is the point count (PTS) and must match the number of rows; a first line of
     words is a column header (``//X Y Z R G B``) and skipped; ``#`` comments are skipped.
@@ -53,6 +54,14 @@ def read_xyz(path):
     if ncol in (6, 9):
         triples = [table[:, 3:6], table[:, 6:9]] if ncol == 9 else [table[:, 3:6]]
         colour = next((k for k, t in enumerate(triples) if _colours(t)), None)
+        if colour is None and ncol == 9:
+            # colours in 0-1: the triple that is not of unit length
+            unit = [_unit_length(t) for t in triples]
+            if unit[0] == unit[1]:
+                raise ValueError("9 columns, but neither x y z r g b nx ny nz nor x y z nx ny "
+                                 "nz r g b: no 0-255 colours and no unit normals to tell them "
+                                 "apart")
+            colour = unit.index(False)
         if colour is not None:
             for i, c in enumerate(("red", "green", "blue")):
                 data.fields[c] = triples[colour][:, i]
@@ -73,6 +82,12 @@ def _colours(triple):
     coordinates are whole numbers only along the axes)."""
     whole = np.all((triple >= 0) & (triple <= 255) & (triple == np.round(triple)))
     return bool(whole and np.any(np.abs(triple).sum(axis=1) > 1))
+
+
+def _unit_length(triple):
+    """Whether the rows of ``triple`` (n, 3) are unit vectors, as written with 3 or more
+    decimals."""
+    return bool(np.median(np.abs(np.linalg.norm(triple, axis=1) - 1.0)) < 1e-3)
 
 
 readers = {".xyz": read_xyz, ".pts": read_xyz}

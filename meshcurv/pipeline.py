@@ -18,8 +18,8 @@ from .fit import fused, jet, outliers
 from .fit.constants import NOISE_SCALE, TUKEY_C
 from .fit.extrapolate import BIAS_RATIO, extrapolate_to_zero
 from .neighbors import (MAX_BALL_FRACTION, BallGrid, KringWork, ball_counts, ball_grid,
-                        ball_neighbors, edge_adjacency, kring_counts, kring_neighbors,
-                        spatial_order)
+                        ball_neighbors, crowd_thinning, edge_adjacency, kring_counts,
+                        kring_neighbors, spatial_order)
 from .neighbors.csr import ball_mean, count_within, csr_rows
 from .normals import face_normal_error, face_vertex_normals, orient, orient_along, \
     orient_like, orient_mst, orient_towards, pca_normals, sphere_normals
@@ -351,16 +351,19 @@ def ball_search(v, finite, radius):
     if tree is None and len(finite):
         tree = cKDTree(v[finite])
     in_grid = isinstance(tree, BallGrid)
+    # crowded parts (a scanner's near field) serve thinned: see crowd_thinning
+    serving = crowd_thinning(tree) if in_grid else None
 
     def neighbors(idx):
         if tree is None:
             return np.zeros(len(idx) + 1, dtype=np.int64), np.zeros(0, dtype=np.int64)
-        return ball_neighbors(tree, finite, v[idx], radius, ascending=False, positions=in_grid)
+        return ball_neighbors(tree, finite, v[idx], radius, ascending=False, positions=in_grid,
+                              serving=serving)
 
     def counts(idx):
         if tree is None:
             return np.zeros(len(idx), dtype=np.int64)
-        return ball_counts(tree, v[idx], radius)
+        return ball_counts(tree, v[idx], radius, serving)
 
     return Search(neighbors, counts, tree.sorted_points if in_grid else v,
                   tree.order if in_grid else None, None, radius)

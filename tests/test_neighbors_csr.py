@@ -96,3 +96,58 @@ def test_ball_mean_averages_the_entries_inside_the_ball_as_numpy_does():
             if r2max == 0.3 and w is not None:
                 assert np.any((total == 0) & (np.bincount(owner[inside],
                                                           minlength=len(centres)) > 0))
+
+
+def test_ball_lists_of_serving_points_are_the_lists_filtered_as_numpy_does():
+    """A dense clump in a sparse cloud, queries arranged so that the sampled ones (which size
+    the scratch) see empty balls: the clump's lists overflow and are searched again. With a
+    ``serving`` mask every list is the unmasked one without the points it leaves out, in both
+    orders and both kinds of entry."""
+    from meshcurv.neighbors import ball_counts
+    rng = np.random.default_rng(4)
+    sparse = rng.uniform(-1.0, 1.0, (3000, 3))
+    clump = rng.normal(scale=0.02, size=(1500, 3))
+    points = np.concatenate([sparse, clump])
+    grid = ball_grid(points, 0.15)
+    query = clump[:640].copy()
+    sampled = np.arange(0, 640, 640 // 64)
+    query[sampled] = sparse[sampled] + [5.0, 0.0, 0.0]
+    query[::3] = sparse[:640:3]
+    serving = rng.uniform(size=len(points)) < 0.3
+    for ascending in (True, False):
+        for positions in (True, False):
+            full = ball_neighbors(grid, None, query, 0.15, ascending, positions)
+            indptr, indices = ball_neighbors(grid, None, query, 0.15, ascending, positions,
+                                             serving=serving)
+            rows_served = serving if positions else serving[np.argsort(grid.order)]
+            for q in range(len(query)):
+                entries = full[1][full[0][q]:full[0][q + 1]]
+                np.testing.assert_array_equal(indices[indptr[q]:indptr[q + 1]],
+                                              entries[rows_served[entries]])
+    lengths = np.diff(ball_neighbors(grid, None, query, 0.15)[0])
+    assert (lengths > 400).sum() > 300 and (lengths < 7).sum() > 100   # both kinds of list
+    np.testing.assert_array_equal(ball_counts(grid, query, 0.15, serving),
+                                  np.diff(ball_neighbors(grid, None, query, 0.15,
+                                                         serving=serving)[0]))
+
+
+def test_crowd_thinning_keeps_the_thin_surface_and_limits_each_small_cell_of_a_clump():
+    from meshcurv.neighbors import crowd_thinning
+    from meshcurv.neighbors.grid import CROWD_FACTOR, CROWD_FINE
+    rng = np.random.default_rng(5)
+    plane = np.column_stack([rng.uniform(0, 10, (40000, 2)), np.zeros(40000)])
+    assert crowd_thinning(ball_grid(plane, 0.3)) is None          # even density: untouched
+    clump = np.column_stack([rng.uniform(3.0, 3.1, (8000, 2)), np.zeros(8000)])
+    grid = ball_grid(np.concatenate([plane, clump]), 0.3)
+    serving = crowd_thinning(grid)
+    kept = serving[np.argsort(grid.order)]                         # by input point
+    counts = np.diff(grid.cell_start)
+    typical = np.median(np.repeat(counts, counts))
+    limit = max(1, int(CROWD_FACTOR * typical / CROWD_FINE ** 2))
+    keys = np.floor(np.concatenate([plane, clump]) * (CROWD_FINE / grid.cell)).astype(np.int64)
+    _, small, size = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+    small = small.ravel()
+    served = np.bincount(small, weights=kept, minlength=len(size))
+    crowded = size > limit
+    assert crowded.any() and (served[crowded] == limit).all()
+    assert kept[:40000][~crowded[small[:40000]]].all()            # the thin surface serves

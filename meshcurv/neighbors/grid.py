@@ -40,6 +40,11 @@ class BallGrid(NamedTuple):
     table_cells: np.ndarray
 
 
+# Crowded parts of a cloud (:func:`crowd_thinning`): a grid cell holding more than CROWD_FACTOR
+# times the typical count is thinned in cells CROWD_FINE times smaller.
+CROWD_FACTOR = 8
+CROWD_FINE = 4
+
 # Dense grids hold up to this many cells per point (int64 each); sparser extents are hashed.
 _DENSE_CELLS_PER_POINT = 4
 
@@ -90,7 +95,8 @@ def ball_grid(points, radius):
     return BallGrid(radius, zero, cell, order, sorted_points, cell_start, zero, keys, table)
 
 
-def ball_neighbors(tree, finite_index, query_points, radius, ascending=True, positions=False):
+def ball_neighbors(tree, finite_index, query_points, radius, ascending=True, positions=False,
+                   serving=None):
     """All points within ``radius`` of each query point (the query point itself included).
 
     Parameters
@@ -109,6 +115,9 @@ def ball_neighbors(tree, finite_index, query_points, radius, ascending=True, pos
         neighbors' coordinates from ``tree.sorted_points`` then find them close together in
         memory, which on a large cloud in random order is several times faster. Ignored (vertex
         indices) with a cKDTree.
+    serving : (k,) bool per row of ``tree.sorted_points``, optional
+        With a grid: list only the points it marks (:func:`crowd_thinning`). Ignored with a
+        cKDTree.
 
     Returns
     -------
@@ -123,7 +132,7 @@ def ball_neighbors(tree, finite_index, query_points, radius, ascending=True, pos
         return cell_ball_csr(tree.order, tree.sorted_points, tree.cell_start,
                                      tree.base, tree.cell, tree.dims, tree.table_keys,
                                      tree.table_cells, q, tree.radius, numba.get_num_threads(),
-                                     bool(ascending), bool(positions))
+                                     bool(ascending), bool(positions), _serving(serving))
     ok = np.isfinite(query_points).all(axis=1)
     lists = np.empty(len(query_points), dtype=object)
     lists[:] = [[] for _ in range(len(query_points))]
@@ -136,19 +145,60 @@ def ball_neighbors(tree, finite_index, query_points, radius, ascending=True, pos
     return indptr, finite_index[flat]
 
 
-def ball_counts(tree, query_points, radius):
-    """(m,) int64 number of points :func:`ball_neighbors` would list for each query point,
-    without storing the lists (to size the work first). ``tree`` as there."""
+def ball_counts(tree, query_points, radius, serving=None):
+    """(m,) int64 number of points :func:`ball_neighbors` would list for each query point
+    (with the same ``serving``), without storing the lists (to size the work first). ``tree``
+    as there."""
     q = np.ascontiguousarray(query_points, dtype=np.float64)
     if isinstance(tree, BallGrid):
         return cell_ball_counts(tree.order, tree.sorted_points, tree.cell_start,
-                                        tree.base, tree.cell, tree.dims, tree.table_keys,
-                                        tree.table_cells, q, tree.radius)
+                                tree.base, tree.cell, tree.dims, tree.table_keys,
+                                tree.table_cells, q, tree.radius, _serving(serving))
     out = np.zeros(len(q), dtype=np.int64)
     ok = np.isfinite(q).all(axis=1)
     if ok.any():
         out[ok] = tree.query_ball_point(q[ok], radius, workers=-1, return_length=True)
     return out
+
+
+def _serving(serving):
+    """``serving`` as the kernels take it: a contiguous bool array, empty for "every point"."""
+    return np.zeros(0, dtype=np.bool_) if serving is None else np.ascontiguousarray(
+        serving, dtype=np.bool_)
+
+
+def crowd_thinning(grid, fine=CROWD_FINE, factor=CROWD_FACTOR):
+    """Which points of ``grid`` (bool per row of its ``sorted_points``) serve as anyone's
+    neighbor where part of the cloud is crowded; None where none is.
+
+    A grid cell is crowded when it holds more than ``factor`` times the median over the points
+    of their own cell's count. Its points are then counted again in cells ``fine`` times
+    smaller, and each such cell keeps ``limit = factor * median / fine^2`` points (its share of
+    a typical cell, ``factor`` times over), evenly spread over its points in grid order; cells
+    holding fewer keep all. So the thin surface around a dense clump keeps every point, and a
+    ball over the clump lists at most ``limit`` of its points per small cell: without this, a
+    clump cost the square of its size (each of its points' balls holds all of it). Every point
+    is still estimated, from the points that serve.
+    """
+    counts = np.diff(grid.cell_start)
+    typical = float(np.median(np.repeat(counts, counts))) if len(grid.order) else 0.0
+    crowded = np.repeat(counts > factor * max(typical, 1.0), counts)
+    if not crowded.any():
+        return None
+    rows = np.flatnonzero(crowded)
+    keys = np.floor(grid.sorted_points[rows] * (fine / grid.cell)).astype(np.int64)
+    _, cell, size = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+    cell = cell.ravel()
+    # each point's rank within its small cell, in grid order
+    by_cell = np.argsort(cell, kind="stable")
+    rank = np.empty(len(rows), dtype=np.int64)
+    rank[by_cell] = np.arange(len(rows)) - np.repeat(np.cumsum(size) - size, size)
+    limit = max(1, int(factor * typical / fine ** 2))
+    n = size[cell]
+    keep = (n <= limit) | ((rank * limit) // n != ((rank - 1) * limit) // n)
+    serving = np.ones(len(grid.order), dtype=bool)
+    serving[rows] = keep
+    return serving
 
 
 def spatial_order(points, cell):
@@ -403,10 +453,14 @@ def _axis_window(x, cell, inv, out):
 
 @njit(cache=True)
 def _scan_run(order, sorted_points, j0, j1, x0, x1, x2, r2max, out, base, found, limit,
-              positions):
+              positions, serving):
     """Append the grid positions ``j0:j1`` within ``sqrt(r2max)`` of (x0, x1, x2) to
-    ``out[base + found:]`` (as far as ``limit`` allows); returns the new count."""
+    ``out[base + found:]`` (as far as ``limit`` allows); returns the new count. With a
+    non-empty ``serving`` (bool per grid position) only the positions it marks."""
+    thinned = serving.shape[0] > 0
     for j in range(j0, j1):
+        if thinned and not serving[j]:
+            continue
         d0 = sorted_points[j, 0] - x0
         d1 = sorted_points[j, 1] - x1
         d2 = sorted_points[j, 2] - x2
@@ -419,7 +473,8 @@ def _scan_run(order, sorted_points, j0, j1, x0, x1, x2, r2max, out, base, found,
 
 @njit(cache=True)
 def _cell_ball_one(order, sorted_points, cell_start, grid_base, cell, dims, table_keys,
-                   table_cells, x0, x1, x2, r2max, out, base, limit, ascending, positions, win):
+                   table_cells, x0, x1, x2, r2max, out, base, limit, ascending, positions, win,
+                   serving):
     """Indices of the grid points within ``sqrt(r2max)`` of (x0, x1, x2).
 
     The cells of the query's window along each axis (:func:`_axis_window`; usually the 3 x 3 x 3
@@ -428,7 +483,7 @@ def _cell_ball_one(order, sorted_points, cell_start, grid_base, cell, dims, tabl
     by its key. Both list the same points in the same order. Writes to ``out[base:]`` as far as
     ``limit`` allows and returns the count. With ``ascending`` (and if all fit) they are sorted,
     else in grid order. With ``positions`` they are rows of ``sorted_points`` instead of point
-    indices. ``win`` is (3, WINDOW) int64 scratch.
+    indices. ``win`` is (3, WINDOW) int64 scratch; ``serving`` as in :func:`_scan_run`.
     """
     if not np.isfinite(x0 + x1 + x2):
         return 0
@@ -450,7 +505,7 @@ def _cell_ball_one(order, sorted_points, cell_start, grid_base, cell, dims, tabl
                         cc = table_cells[slot]
                         found = _scan_run(order, sorted_points, cell_start[cc],
                                           cell_start[cc + 1], x0, x1, x2, r2max, out, base,
-                                          found, limit, positions)
+                                          found, limit, positions, serving)
     else:
         nx, ny, nz = dims[0], dims[1], dims[2]
         contiguous = win[2, n2 - 1] - win[2, 0] == n2 - 1
@@ -469,14 +524,14 @@ def _cell_ball_one(order, sorted_points, cell_start, grid_base, cell, dims, tabl
                     if z0 <= z1:
                         found = _scan_run(order, sorted_points, cell_start[col + z0],
                                           cell_start[col + z1 + 1], x0, x1, x2, r2max, out,
-                                          base, found, limit, positions)
+                                          base, found, limit, positions, serving)
                     continue
                 for c in range(n2):
                     az = win[2, c] - grid_base[2]
                     if az >= 0 and az < nz:
                         found = _scan_run(order, sorted_points, cell_start[col + az],
                                           cell_start[col + az + 1], x0, x1, x2, r2max, out,
-                                          base, found, limit, positions)
+                                          base, found, limit, positions, serving)
     if ascending and base + found <= limit:
         _shell_sort(out, base, base + found)
     return found
@@ -498,7 +553,7 @@ def _shell_sort(a, lo, hi):
 
 @njit(parallel=True, cache=True)
 def cell_ball_counts(order, sorted_points, cell_start, grid_base, cell, dims, table_keys,
-                     table_cells, query_points, radius):
+                     table_cells, query_points, radius, serving):
     """(m,) int64 number of grid points within ``radius`` of each query point (nothing
     stored: what :func:`cell_ball_csr` would list, to size the work before doing it)."""
     m = query_points.shape[0]
@@ -512,18 +567,19 @@ def cell_ball_counts(order, sorted_points, cell_start, grid_base, cell, dims, ta
             counts[q] = _cell_ball_one(order, sorted_points, cell_start, grid_base, cell, dims,
                                        table_keys, table_cells, query_points[q, 0],
                                        query_points[q, 1], query_points[q, 2], r2max, dummy, 0,
-                                       0, False, False, win)
+                                       0, False, False, win, serving)
     return counts
 
 
 @njit(parallel=True, cache=True)
 def cell_ball_csr(order, sorted_points, cell_start, grid_base, cell, dims, table_keys,
-                  table_cells, query_points, radius, nthreads, ascending, positions):
+                  table_cells, query_points, radius, nthreads, ascending, positions, serving):
     """All grid points within ``radius`` of each query point, CSR.
 
     Each list is ascending with ``ascending``, else in grid order (cheaper; for consumers that
     do not depend on the order). With ``positions`` the lists hold rows of ``sorted_points``
-    (whose neighborhoods then lie close together in memory) instead of point indices.
+    (whose neighborhoods then lie close together in memory) instead of point indices. With a
+    non-empty ``serving`` (bool per row of ``sorted_points``) only the points it marks.
 
     The grid comes from :func:`dense_grid_build` (``table_keys`` empty; ``grid_base`` and
     ``dims`` its block of cells) or :func:`hashed_grid_build` (``grid_base``, ``dims`` unused),
@@ -543,7 +599,7 @@ def cell_ball_csr(order, sorted_points, cell_start, grid_base, cell, dims, table
         tot += _cell_ball_one(order, sorted_points, cell_start, grid_base, cell, dims,
                               table_keys, table_cells,
                               query_points[qi, 0], query_points[qi, 1], query_points[qi, 2],
-                              r2max, dummy, 0, 0, False, False, win0)
+                              r2max, dummy, 0, 0, False, False, win0, serving)
         cnt += 1
     cap = stream_capacity(tot, cnt)
     buf = np.empty(nthreads * per * cap, dtype=np.int64)
@@ -556,7 +612,8 @@ def cell_ball_csr(order, sorted_points, cell_start, grid_base, cell, dims, table
             f = _cell_ball_one(order, sorted_points, cell_start, grid_base, cell, dims,
                                table_keys, table_cells,
                                query_points[qi, 0], query_points[qi, 1], query_points[qi, 2],
-                               r2max, buf, pos, lo + per * cap, ascending, positions, win)
+                               r2max, buf, pos, lo + per * cap, ascending, positions, win,
+                               serving)
             counts[qi + 1] = f
             pos += f
         used[t] = pos - lo
@@ -569,5 +626,5 @@ def cell_ball_csr(order, sorted_points, cell_start, grid_base, cell, dims, table
                                table_keys, table_cells,
                                query_points[qi, 0], query_points[qi, 1], query_points[qi, 2],
                                r2max, indices, counts[qi], counts[qi + 1],
-                               ascending, positions, win)
+                               ascending, positions, win, serving)
     return counts, indices

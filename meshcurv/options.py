@@ -42,19 +42,21 @@ MAX_DIRECTIONS = 64
 # Ranges of the numeric switches (low exclusive for slab, inclusive otherwise): a slab of
 # half-width 0 holds no point and one wider than the ball holds the whole ball (every
 # half-set sees every direction); a half-set cannot reach beyond the ball (min_spread <= 1).
-_RANGES = (("slab", 0.0, 1.0), ("min_points", 1.0, np.inf), ("min_spread", 0.0, 1.0))
+# (name, low, high, whether low itself is allowed)
+_RANGES = (("slab", 0.0, 1.0, False), ("min_points", 1.0, np.inf, True),
+           ("min_spread", 0.0, 1.0, True))
 
 
-def _check_in_range(name, value, low, high):
-    """ValueError (one line) unless ``value`` is a real number in ``(low, high]`` for
-    ``slab``, ``[low, high]`` otherwise."""
+def _check_in_range(name, value, low, high, low_allowed):
+    """ValueError (one line) unless ``value`` is a real number in ``[low, high]`` (``(low,
+    high]`` unless ``low_allowed``)."""
     try:
         x = float(value)
     except (TypeError, ValueError):
         x = np.nan
-    above = x > low if name == "slab" else x >= low
+    above = x >= low if low_allowed else x > low
     if isinstance(value, (bool, np.bool_, str)) or not (above and x <= high):
-        side = "(" if name == "slab" else "["
+        side = "[" if low_allowed else "("
         raise ValueError(f"{name} must be a number in {side}{low:g}, {high:g}], got {value!r}")
 
 
@@ -88,9 +90,9 @@ def check_options(**options):
         if not ok:
             raise ValueError(f"n_directions must be a whole number from 3 to {MAX_DIRECTIONS}, "
                              f"got {nd!r}")
-    for name, low, high in _RANGES:
+    for name, *bounds in _RANGES:
         if name in options:
-            _check_in_range(name, options[name], low, high)
+            _check_in_range(name, options[name], *bounds)
     if "min_points" in options and not float(options["min_points"]).is_integer():
         raise ValueError(f"min_points must be a whole number, got {options['min_points']!r}")
     orientation = options.get("orientation", "mst")

@@ -506,11 +506,14 @@ def bridged_graph(v, graph, search, block=BLOCK):
     labels = orient.graph_pieces(graph)
     columns = [graph]
     vertex = search.rank if search.rank is not None else np.arange(len(v))
+    finite = None
     for _ in range(BRIDGE_ROUNDS):
         sizes = np.bincount(labels, minlength=len(v))
         if np.count_nonzero(sizes) <= 1:
             break
-        rows = np.flatnonzero((labels != np.argmax(sizes)) & np.isfinite(v).all(axis=1))
+        if finite is None:
+            finite = np.isfinite(v).all(axis=1)
+        rows = np.flatnonzero((labels != np.argmax(sizes)) & finite)
         near = np.full(len(v), -1, dtype=np.int32)
         for pos in blocks(rows, False, "", block):
             indptr, indices = search.neighbors(pos)

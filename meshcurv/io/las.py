@@ -293,6 +293,13 @@ def read_las_points(path, chunk_size=DEFAULT_CHUNK):
     return xyz, nv
 
 
+def _ply_scalar(dtype):
+    """Whether a PLY vertex property can hold values of ``dtype``: integers of 8 to 32 bits,
+    floats of 32 or 64."""
+    return (dtype.kind in "iu" and dtype.itemsize <= 4) or (dtype.kind == "f"
+                                                            and dtype.itemsize in (4, 8))
+
+
 def read_las_cloud(path, chunk_size=DEFAULT_CHUNK, fields=CURVATURE_FIELDS, carry=False):
     """All points of a LAS/LAZ file in memory, with the extra dimensions named in ``fields``
     (also with a radius suffix: ``k1`` finds ``k1_r0p5`` too).
@@ -321,9 +328,7 @@ def read_las_cloud(path, chunk_size=DEFAULT_CHUNK, fields=CURVATURE_FIELDS, carr
         wanted.update({PLY_CARRY_PREFIX + re.sub(r"\s", "_", d.name): d.name
                        for d in point_format.dimensions
                        if d.name.lower() not in skip and d.num_elements == 1
-                       and np.dtype(d.dtype).kind in "iuf"
-                       and np.dtype(d.dtype).itemsize in ((1, 2, 4, 8) if np.dtype(
-                           d.dtype).kind == "f" else (1, 2, 4))})
+                       and _ply_scalar(np.dtype(d.dtype))})
     xyz, nv, found = [], [], {f: [] for f in wanted}
     for _, p, n, rec in iter_las_chunks(path, chunk_size, with_records=True):
         xyz.append(p)

@@ -216,6 +216,15 @@ def test_default_radius_reaches_across_scan_lines_far_denser_along_than_across()
     assert np.mean(np.abs(res.k2 - s.k2)[inner]) < 2e-4
 
 
+@pytest.mark.parametrize("far", [1e200, -1e300])
+def test_a_far_point_does_not_move_the_grown_default_radius(far):
+    # the growth counts balls; scipy's threaded ball count of a tree holding a far point
+    # overflowed in its worker threads and left their other counts at 0, silently
+    s = surfaces.scan_terrain((0.00625, 0.25), extent=1.5)
+    alone = default_radius(s.vertices)
+    assert default_radius(np.vstack([[far, 0.0, 0.0], s.vertices])) == alone
+
+
 def test_large_inputs_keep_their_default_radius():
     # 400 points and more: the ball's target of 100 points is a quarter at most, as before
     p = _unit_sphere_points(5000, np.random.default_rng(3))

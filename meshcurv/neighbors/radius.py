@@ -156,12 +156,19 @@ def _grown_to_target(tree, probe, radius, target_neighbors):
     directions (scan lines far denser along the line than across it: the 16 nearest all lie
     on the point's own line, and a ball of the radius they give reaches no other line). Grown
     by the square root of the missing share (an area's count) until the median ball holds the
-    whole target (at most ``_GROW_STEPS`` steps)."""
+    whole target (at most ``_GROW_STEPS`` steps).
+
+    The balls are counted by nearest-neighbour queries bounded by the radius, up to the
+    target (all the test needs): a ball query of a tree that holds a far point (1e200)
+    overflows in scipy's worker threads, which leave their other counts at 0 and do not
+    raise."""
     enough = 0.5 * target_neighbors
     probe = probe[:_COUNT_SAMPLE]
+    most = min(tree.n, int(math.ceil(target_neighbors)) + 1)
     for _ in range(_GROW_STEPS):
-        count = float(np.median(tree.query_ball_point(probe, radius, return_length=True,
-                                                      workers=-1))) - 1.0
+        d, _ = tree.query(probe, k=most, distance_upper_bound=radius * (1.0 + 1e-12),
+                          workers=-1)
+        count = float(np.median(np.sum(d <= radius, axis=1))) - 1.0
         if count >= enough:
             break
         enough = target_neighbors

@@ -83,7 +83,7 @@ def test_annotated_ply_names_every_field_scalar_prefixed_and_keeps_full_precisio
         assert v["scalar_" + name].dtype == arr.dtype, name
         assert _bits(v["scalar_" + name]) == _bits(arr), name
     back = io.read(str(out))  # and meshcurv's reader gives them under their own names
-    assert set(FIELDS) | {"quality"} == set(back.fields)
+    assert set(FIELDS) | {"quality", "red", "green", "blue"} == set(back.fields)
     for name, arr in _expected(res).items():
         assert _bits(back.fields[name]) == _bits(arr), name
 
@@ -92,9 +92,11 @@ def test_files_with_the_old_plain_names_read_and_summarise_the_same(tmp_path, to
     new = tmp_path / "new.ply"
     res = _annotate(new, torus.vertices, torus.faces)
     old = tmp_path / "old.ply"  # the layout meshcurv wrote before the scalar_ prefix
+    a = io.read(str(new))
     io.write_ply(str(old), torus.vertices, torus.faces,
-                 {**_expected(res), "quality": np.where(res.valid, res.mean, 0.0)})
-    a, b = io.read(str(new)), io.read(str(old))
+                 {**_expected(res), "quality": np.where(res.valid, res.mean, 0.0),
+                  **{c: a.fields[c] for c in ("red", "green", "blue")}})
+    b = io.read(str(old))
     assert a.fields.keys() == b.fields.keys()
     for name in a.fields:
         assert _bits(a.fields[name]) == _bits(b.fields[name]), name

@@ -69,6 +69,43 @@ def test_point_cloud_ply_has_no_faces_and_keeps_extra_fields(tmp_path):
     np.testing.assert_array_equal(ply["vertex"].data["intensity"], np.arange(200))
 
 
+def test_the_inputs_own_colour_and_quality_are_kept_beside_the_ramp(tmp_path):
+    # a coloured scan (PLY or XYZ) or a MeshLab mesh with its own per-vertex quality: the ramp
+    # took their place and they were lost
+    rng = np.random.default_rng(2)
+    pts = rng.normal(size=(300, 3))
+    pts /= np.linalg.norm(pts, axis=1, keepdims=True)
+    rgb = {c: rng.integers(0, 256, 300).astype(np.uint8) for c in ("red", "green", "blue")}
+    own = dict(rgb, quality=rng.random(300).astype(np.float32))
+    src = tmp_path / "scan.ply"
+    io.write_ply(str(src), pts, None, own)
+    data = io.read(str(src))
+    res = meshcurv.principal_curvatures(pts)
+    out = tmp_path / "scan_curv.ply"
+    io.write_annotated(str(out), data, res)
+    v = PlyData.read(str(out))["vertex"].data
+    for name, arr in own.items():
+        assert v["scalar_" + name].dtype == arr.dtype
+        np.testing.assert_array_equal(v["scalar_" + name], arr)
+    ramp = shape.colorize(np.where(res.valid, res.mean, np.nan), "mean")
+    np.testing.assert_array_equal(np.column_stack([v[c] for c in rgb]), ramp)
+    np.testing.assert_array_equal(v["quality"], np.where(res.valid, res.mean, 0.0))
+    # annotated again: the first input's colour stays once, the old ramp is replaced
+    again = tmp_path / "scan_curv2.ply"
+    io.write_annotated(str(again), io.read(str(out)), res, quality="k1")
+    w = PlyData.read(str(again))["vertex"].data
+    names = list(w.dtype.names)
+    assert len(names) == len(set(names)) and names.count("scalar_red") == 1
+    np.testing.assert_array_equal(w["scalar_red"], rgb["red"])
+    np.testing.assert_array_equal(w["quality"], np.where(res.valid, res.k1, 0.0))
+    # an XYZ cloud's colours too
+    xyz = tmp_path / "scan.xyz"
+    np.savetxt(xyz, np.column_stack([pts] + [rgb[c] for c in rgb]), fmt="%.17g")
+    io.write_annotated(str(tmp_path / "xyz_curv.ply"), io.read(str(xyz)), res)
+    x = PlyData.read(str(tmp_path / "xyz_curv.ply"))["vertex"].data
+    np.testing.assert_array_equal(x["scalar_green"], rgb["green"])
+
+
 def test_writing_over_the_input_file_is_refused(tmp_path, torus, torus_result):
     src = tmp_path / "in.ply"
     io.write_ply(str(src), torus.vertices, torus.faces)

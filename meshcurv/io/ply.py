@@ -157,8 +157,8 @@ def _read_checked(path):
 
 def _vertex_arrays(vert):
     """``(vertices (n, 3) float64, normals (n, 3) float64 or None, fields {name: (n,)}))`` of
-    the vertex element's structured array ``vert``; fields keep their dtype, list properties
-    are dropped."""
+    the vertex element's structured array ``vert``; fields (colour and quality included) keep
+    their dtype, list properties are dropped."""
     props = vert.dtype.names or ()
     if not all(c in props for c in "xyz"):
         raise ValueError("vertex element lacks x, y, z")
@@ -170,7 +170,7 @@ def _vertex_arrays(vert):
     field_names = ply_field_names(props)
     # copies: the file is memory-mapped and closed now
     fields = {field_names[p]: np.array(vert[p]) for p in props
-              if p not in _GEOMETRY and p not in _COLOR and vert[p].dtype != object}  # no lists
+              if p not in _GEOMETRY and vert[p].dtype != object}  # no lists
     return vertices, normals, fields
 
 
@@ -204,8 +204,9 @@ def read_ply(path):
 
     Faces are read from the ``face`` element (``vertex_indices`` or ``vertex_index``);
     polygons are fan-triangulated. ``nx ny nz`` become ``normals``; every other vertex property
-    except ``x y z`` and colour goes to ``fields`` unchanged (same dtype), the annotated fields
-    under their own names (``scalar_k1`` as ``k1``, see :func:`ply_field_names`).
+    except ``x y z`` (colour and quality included) goes to ``fields`` unchanged (same dtype),
+    the annotated fields under their own names (``scalar_k1`` as ``k1``, see
+    :func:`ply_field_names`).
 
     Element counts must match the data: a file too short for the counts of its header, or
     with data beyond them, is refused before anything is allocated for it.
@@ -278,9 +279,18 @@ def _annotated_fields(data, results, suffixes, quality, colormap, clamp):
     first = results[0]
     values = curvature_fields(first)
     # an annotated input's curvature (at any radius) is replaced, never kept beside the new one
-    fields = {k: v for k, v in data.fields.items()
-              if k not in _GEOMETRY and k not in _COLOR and k != "quality"
-              and not _is_prefixed(ply_field_names([k])[k])}
+    ours = {k for k in data.fields if _is_prefixed(ply_field_names([k])[k])}
+    fields = {}
+    for k, v in data.fields.items():
+        if k in _GEOMETRY or k in ours:
+            continue
+        if k in _COLOR or k == "quality":
+            # the input's own colour and quality make way for the ramp, kept under the name
+            # CloudCompare loads (as LAS colours are); an annotated input's are a ramp of ours
+            k = PLY_PREFIX + k
+            if ours or k in data.fields:
+                continue
+        fields[k] = v
     fields.update({"nx": first.normals[:, 0], "ny": first.normals[:, 1],
                    "nz": first.normals[:, 2]})
     for result, suffix in zip(results, suffixes):
@@ -313,8 +323,10 @@ def write_annotated(path, data, result, quality="mean", colormap="Turbo", clamp=
     The curvature fields are named ``scalar_<field>`` in the file (``scalar_k1``, see
     :func:`ply_property`), the name under which CloudCompare loads them as scalar fields;
     :func:`read_ply` gives them back as ``fields["k1"]`` (``fields["k1_r0p5"]``). Other
-    per-vertex properties of the input PLY (``data.fields``) are kept, except annotated fields
-    (with or without a radius suffix), which are replaced.
+    per-vertex properties of the input (``data.fields``) are kept, except annotated fields
+    (with or without a radius suffix), which are replaced; the input's own colour and
+    ``quality`` are kept as ``scalar_red`` ... ``scalar_quality`` (not those of an annotated
+    input: they are a ramp of an earlier run).
     """
     if file_extension(path) != ".ply":
         raise MeshFileError(f"{path}: annotated output must be a .ply file")

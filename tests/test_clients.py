@@ -288,6 +288,30 @@ def test_cloudcompare_loads_every_field_as_a_single_precision_scalar_field(tmp_p
 
 
 @pytest.mark.clients
+def test_cloudcompare_shows_a_coloured_inputs_own_colour_and_every_field(tmp_path, cloud):
+    # the input's colour and quality kept as scalar_red ... scalar_quality: CloudCompare takes
+    # scalar_red, scalar_green, scalar_blue (before the ramp's red green blue in the file) as
+    # the cloud's colour, and scalar_quality as a scalar field
+    rng = np.random.default_rng(4)
+    rgb = {c: rng.integers(0, 256, len(cloud)).astype(np.uint8) for c in ("red", "green", "blue")}
+    own = dict(rgb, quality=rng.random(len(cloud)).astype(np.float32))
+    data = io.MeshData(cloud, None, fields=own)
+    res = meshcurv.principal_curvatures(cloud, radius=0.6)
+    path = tmp_path / "coloured.ply"
+    io.write_annotated(str(path), data, res)
+    out = tmp_path / "cc_out.ply"
+    run = _headless([_cloudcompare(), "-SILENT", "-AUTO_SAVE", "OFF", "-O", str(path),
+                     "-C_EXPORT_FMT", "PLY", "-PLY_EXPORT_FMT", "BINARY_LE", "-SAVE_CLOUDS",
+                     "FILE", str(out)], tmp_path)
+    assert run.returncode == 0 and out.exists(), run.stdout[-2000:] + run.stderr[-2000:]
+    v = PlyData.read(str(out))["vertex"].data
+    for c in rgb:
+        np.testing.assert_array_equal(v[c], rgb[c])
+    np.testing.assert_array_equal(v["scalar_quality"], own["quality"])
+    assert _bits(v["scalar_k1"]) == _bits(res.k1.astype(np.float32))
+
+
+@pytest.mark.clients
 def test_cloudcompare_loads_the_fields_of_save_curvature_mesh(tmp_path, torus):
     ms = _filtered_meshset(torus.vertices, torus.faces)
     path = tmp_path / "filtered.ply"

@@ -216,6 +216,32 @@ def test_default_radius_reaches_across_scan_lines_far_denser_along_than_across()
     assert np.mean(np.abs(res.k2 - s.k2)[inner]) < 2e-4
 
 
+def _torus_curvatures(v, major, minor):
+    """Exact (k1, k2) of a torus about the z axis at its vertices, outward normals."""
+    rho = np.hypot(v[:, 0], v[:, 1])
+    tube, around = np.full(len(v), 1.0 / minor), (rho - major) / (minor * rho)
+    return np.maximum(tube, around), np.minimum(tube, around)
+
+
+@pytest.mark.parametrize("major, minor, error", [(2.0, 0.5, 0.05), (1.0, 0.2, 0.1), (3.0, 1.0, 0.05)])
+def test_a_coarse_meshs_default_radius_stays_on_a_local_patch(major, minor, error):
+    # trimesh.creation.torus' own 32 x 32 grid: the ~100-vertex balls reached around the tube
+    # (radius 1.05 on a tube of 0.5; 0.51 on 0.2): mean |dk| 0.38 and 2.0, all rows valid.
+    # Now within 1-2 % of |k1| (= 1 / minor); measured 0.028, 0.069, 0.022
+    m = trimesh.creation.torus(major, minor)
+    k1, k2 = _torus_curvatures(m.vertices, major, minor)
+    res = meshcurv.principal_curvatures(m)
+    assert res.radius < 1.5 * minor and res.valid.all()
+    assert np.mean(0.5 * (np.abs(res.k1 - k1) + np.abs(res.k2 - k2))) < error
+
+
+def test_a_noisy_or_fine_meshs_default_radius_is_the_clouds():
+    # noise makes the balls thicker as they shrink: the radius stays where the density puts it
+    for mesh in (surfaces.add_normal_noise(surfaces.torus(2.0, 0.5, 240, 60), 0.01, seed=1),
+                 surfaces.torus(2.0, 0.5, 240, 60), surfaces.ellipsoid((2.0, 1.5, 1.0), 4)):
+        assert default_radius(mesh.vertices, faces=mesh.faces) == default_radius(mesh.vertices)
+
+
 @pytest.mark.parametrize("far", [1e200, -1e300])
 def test_a_far_point_does_not_move_the_grown_default_radius(far):
     # the growth counts balls; scipy's threaded ball count of a tree holding a far point

@@ -7,7 +7,8 @@ import numpy as np
 from numba import njit
 from scipy.spatial import cKDTree
 
-__all__ = ["default_radius", "power_of_two_scale", "typical_extent", "MAX_BALL_FRACTION"]
+__all__ = ["default_radius", "power_of_two_scale", "typical_extent", "MAX_BALL_FRACTION",
+           "PATCH_FLATNESS"]
 
 # Largest share of the points a ball may hold and still be a local patch: on a sphere a ball
 # holding a quarter of the points spans a 60 degree cap (curvature x radius = 1); the default
@@ -18,6 +19,15 @@ MAX_BALL_FRACTION = 0.25
 # longest edge: the 1-ring is inside (a 12-vertex icosahedron: the 1-ring at 1.05, the next
 # vertices at 1.70 on the unit sphere).
 RING_MARGIN = 1.25
+
+# A mesh's default radius is shrunk (by sqrt 2 at a time, not below the 1-ring's reach) while
+# the median ball is not a local patch: the smallest eigenvalue of its points' covariance
+# over the middle one above this. A spherical cap whose normals turn by 90 degrees at its rim
+# (curvature x radius = sqrt 2) gives 1/6; a ball reaching across a coarse torus' tube gives
+# 0.8 (:func:`_local_patch`).
+PATCH_FLATNESS = 1.0 / 6.0
+# Vertices whose balls :func:`_local_patch` measures.
+_PATCH_SAMPLE = 2048
 
 # Most growth steps of the default radius where its balls hold too few points
 # (:func:`_grown_to_target`): each multiplies it by the square root of the missing share.
@@ -67,7 +77,9 @@ def default_radius(points, target_neighbors=100, sample=20000, seed=0, faces=Non
     scale (1e-300 ... 1e300) are measured on coordinates scaled by a power of two. Small inputs
     get balls of at most ``MAX_BALL_FRACTION`` of their points (fewer than 400 points: the
     target is a quarter of them, and the density comes from that many neighbors), and a mesh's
-    radius reaches its 1-ring (``RING_MARGIN`` times the median longest edge of a vertex).
+    radius reaches its 1-ring (``RING_MARGIN`` times the median longest edge of a vertex) and
+    stays on a local patch where the mesh is coarse for its shape (a low-poly torus: see
+    :func:`_local_patch`).
 
     Parameters
     ----------
@@ -94,7 +106,58 @@ def default_radius(points, target_neighbors=100, sample=20000, seed=0, faces=Non
         p = np.unique(p, axis=0)
         radius = _default_radius(p, target_neighbors, sample, seed) if len(p) > 1 else radius
     if faces is not None and len(faces) and np.isfinite(radius):
-        radius = max(radius, RING_MARGIN * _ring_reach(points, faces, s))
+        floor = RING_MARGIN * _ring_reach(points, faces, s)
+        radius = max(radius, floor)
+        radius = _local_patch(np.asarray(points, dtype=np.float64) * s,
+                              np.asarray(faces, dtype=np.int64), radius * s, floor * s) / s
+    return radius
+
+
+def _local_patch(points, faces, radius, floor):
+    """``radius``, or smaller where its balls reach beyond a local patch of the mesh: a coarse
+    torus (1024 vertices, tube radius 0.5) got a default radius of 1.05, whose k-rings wrap
+    around the tube, and curvatures 19 % off, all marked valid. While the median over a
+    sample of vertices of the flatness of their k-ring balls (smallest eigenvalue of the
+    points' covariance over the middle one) exceeds :data:`PATCH_FLATNESS`, the radius is
+    divided by sqrt 2, not below ``floor``, and only while that at least halves the flatness:
+    a surface's shape makes it fall like the squared radius, where noise makes it rise (a
+    noisy mesh keeps its radius). Units: model units times the caller's power-of-two scale."""
+    from .kring import edge_adjacency, kring_neighbors
+
+    finite = np.isfinite(points).all(axis=1)
+    used = np.zeros(len(points), dtype=bool)
+    used[faces.ravel()] = True
+    candidates = np.flatnonzero(finite & used)
+    if len(candidates) == 0:
+        return radius
+    sample = candidates[np.unique(np.linspace(0, len(candidates) - 1,
+                                              min(_PATCH_SAMPLE, len(candidates))).astype(np.int64))]
+    adjacency = edge_adjacency(faces, len(points))
+
+    def flatness(r):
+        indptr, indices = kring_neighbors(points, adjacency, r, sample)
+        rows = np.concatenate([sample, indices])
+        owner = np.concatenate([np.arange(len(sample)), np.repeat(np.arange(len(sample)),
+                                                                  np.diff(indptr))])
+        q = points[rows] - points[sample][owner]          # about the vertex: no cancellation
+        count = np.bincount(owner, minlength=len(sample)).astype(np.float64)
+        mean = np.stack([np.bincount(owner, q[:, a], len(sample)) for a in range(3)], 1)
+        mean /= count[:, None]
+        d = q - mean[owner]
+        cov = np.einsum("ki,kj->kij", d, d)
+        cov = np.stack([np.bincount(owner, cov[:, i, j], len(sample))
+                        for i in range(3) for j in range(3)], 1).reshape(-1, 3, 3)
+        ev = np.linalg.eigvalsh(cov[count >= 4])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return float(np.nanmedian(ev[:, 0] / ev[:, 1])) if len(ev) else np.nan
+
+    now = flatness(radius)
+    while now > PATCH_FLATNESS and radius > floor:
+        smaller = max(radius / math.sqrt(2.0), floor)
+        then = flatness(smaller)
+        if not then <= 0.5 * now:
+            break
+        radius, now = smaller, then
     return radius
 
 

@@ -223,23 +223,29 @@ def _torus_curvatures(v, major, minor):
     return np.maximum(tube, around), np.minimum(tube, around)
 
 
+@pytest.mark.parametrize("cloud", [False, True])
 @pytest.mark.parametrize("major, minor, error", [(2.0, 0.5, 0.05), (1.0, 0.2, 0.1), (3.0, 1.0, 0.05)])
-def test_a_coarse_meshs_default_radius_stays_on_a_local_patch(major, minor, error):
+def test_a_coarse_default_radius_stays_on_a_local_patch(major, minor, error, cloud):
     # trimesh.creation.torus' own 32 x 32 grid: the ~100-vertex balls reached around the tube
-    # (radius 1.05 on a tube of 0.5; 0.51 on 0.2): mean |dk| 0.38 and 2.0, all rows valid.
-    # Now within 1-2 % of |k1| (= 1 / minor); measured 0.028, 0.069, 0.022
+    # (radius 1.05 on a tube of 0.5; 0.51 on 0.2): mean |dk| 0.38 and 2.0 on the mesh, 0.64
+    # and 3.5 on its points, all rows valid. Now within 1-2 % of |k1| (= 1 / minor); measured
+    # 0.028, 0.069, 0.022 (mesh), 0.028, 0.068, 0.019 (points)
     m = trimesh.creation.torus(major, minor)
     k1, k2 = _torus_curvatures(m.vertices, major, minor)
-    res = meshcurv.principal_curvatures(m)
+    res = meshcurv.principal_curvatures(m.vertices if cloud else m)
     assert res.radius < 1.5 * minor and res.valid.all()
     assert np.mean(0.5 * (np.abs(res.k1 - k1) + np.abs(res.k2 - k2))) < error
 
 
-def test_a_noisy_or_fine_meshs_default_radius_is_the_clouds():
+def test_a_noisy_or_fine_meshs_default_radius_is_the_density_radius():
     # noise makes the balls thicker as they shrink: the radius stays where the density puts it
+    # (that of 100 points: d16 radius, 16 nearest, x sqrt(100 / 16))
     for mesh in (surfaces.add_normal_noise(surfaces.torus(2.0, 0.5, 240, 60), 0.01, seed=1),
                  surfaces.torus(2.0, 0.5, 240, 60), surfaces.ellipsoid((2.0, 1.5, 1.0), 4)):
-        assert default_radius(mesh.vertices, faces=mesh.faces) == default_radius(mesh.vertices)
+        d16 = cKDTree(mesh.vertices).query(mesh.vertices, k=17)[0][:, 16]
+        density = np.sqrt(100 / 16 * np.median(d16 ** 2))
+        for faces in (mesh.faces, None):
+            assert default_radius(mesh.vertices, faces=faces) == pytest.approx(density, rel=1e-12)
 
 
 @pytest.mark.parametrize("far", [1e200, -1e300])

@@ -20,11 +20,11 @@ MAX_BALL_FRACTION = 0.25
 # vertices at 1.70 on the unit sphere).
 RING_MARGIN = 1.25
 
-# A mesh's default radius is shrunk (by sqrt 2 at a time, not below the 1-ring's reach) while
-# the median ball is not a local patch: the smallest eigenvalue of its points' covariance
-# over the middle one above this. A spherical cap whose normals turn by 90 degrees at its rim
-# (curvature x radius = sqrt 2) gives 1/6; a ball reaching across a coarse torus' tube gives
-# 0.8 (:func:`_local_patch`).
+# The default radius is shrunk (by sqrt 2 at a time, not below a mesh's 1-ring reach or half
+# a cloud's density radius) while the median ball is not a local patch: the smallest
+# eigenvalue of its points' covariance over the middle one above this. A spherical cap whose
+# normals turn by 90 degrees at its rim (curvature x radius = sqrt 2) gives 1/6; a ball
+# reaching across a coarse torus' tube gives 0.8 (:func:`_local_patch`).
 PATCH_FLATNESS = 1.0 / 6.0
 # Vertices whose balls :func:`_local_patch` measures.
 _PATCH_SAMPLE = 2048
@@ -77,9 +77,10 @@ def default_radius(points, target_neighbors=100, sample=20000, seed=0, faces=Non
     scale (1e-300 ... 1e300) are measured on coordinates scaled by a power of two. Small inputs
     get balls of at most ``MAX_BALL_FRACTION`` of their points (fewer than 400 points: the
     target is a quarter of them, and the density comes from that many neighbors), and a mesh's
-    radius reaches its 1-ring (``RING_MARGIN`` times the median longest edge of a vertex) and
-    stays on a local patch where the mesh is coarse for its shape (a low-poly torus: see
-    :func:`_local_patch`).
+    radius reaches its 1-ring (``RING_MARGIN`` times the median longest edge of a vertex).
+    Where the sampling is coarse for the shape (a low-poly torus) the radius is smaller, so
+    that its balls stay on a local patch of the surface (:func:`_local_patch`; a mesh's by its
+    k-rings, down to the 1-ring, a cloud's by its balls, down to half the radius).
 
     Parameters
     ----------
@@ -97,60 +98,32 @@ def default_radius(points, target_neighbors=100, sample=20000, seed=0, faces=Non
     s = power_of_two_scale(typical_extent(p, sample, seed))
     if s != 1.0:
         with np.errstate(over="ignore"):
-            scaled = p * s
-        radius = default_radius(scaled, target_neighbors, sample, seed) / s
-    else:
-        radius = _default_radius(p, target_neighbors, sample, seed)
+            scaled = np.asarray(points, dtype=np.float64) * s     # every row: faces index them
+        return default_radius(scaled, target_neighbors, sample, seed, faces) / s
+    mesh = faces is not None and len(faces) > 0
+    radius = _default_radius(p, target_neighbors, sample, seed, patch=not mesh)
     if not np.isfinite(radius):
         # most points duplicated (coincident points are nobody's neighbor): distinct ones
         p = np.unique(p, axis=0)
-        radius = _default_radius(p, target_neighbors, sample, seed) if len(p) > 1 else radius
-    if faces is not None and len(faces) and np.isfinite(radius):
-        floor = RING_MARGIN * _ring_reach(points, faces, s)
-        radius = max(radius, floor)
-        radius = _local_patch(np.asarray(points, dtype=np.float64) * s,
-                              np.asarray(faces, dtype=np.int64), radius * s, floor * s) / s
+        radius = (_default_radius(p, target_neighbors, sample, seed, patch=not mesh)
+                  if len(p) > 1 else radius)
+    if mesh and np.isfinite(radius):
+        v = np.asarray(points, dtype=np.float64)
+        f = np.asarray(faces, dtype=np.int64)
+        floor = RING_MARGIN * _ring_reach(v, f, 1.0)
+        radius = _local_patch(max(radius, floor), floor, _kring_flatness(v, f))
     return radius
 
 
-def _local_patch(points, faces, radius, floor):
-    """``radius``, or smaller where its balls reach beyond a local patch of the mesh: a coarse
-    torus (1024 vertices, tube radius 0.5) got a default radius of 1.05, whose k-rings wrap
-    around the tube, and curvatures 19 % off, all marked valid. While the median over a
-    sample of vertices of the flatness of their k-ring balls (smallest eigenvalue of the
-    points' covariance over the middle one) exceeds :data:`PATCH_FLATNESS`, the radius is
-    divided by sqrt 2, not below ``floor``, and only while that at least halves the flatness:
-    a surface's shape makes it fall like the squared radius, where noise makes it rise (a
-    noisy mesh keeps its radius). Units: model units times the caller's power-of-two scale."""
-    from .kring import edge_adjacency, kring_neighbors
-
-    finite = np.isfinite(points).all(axis=1)
-    used = np.zeros(len(points), dtype=bool)
-    used[faces.ravel()] = True
-    candidates = np.flatnonzero(finite & used)
-    if len(candidates) == 0:
-        return radius
-    sample = candidates[np.unique(np.linspace(0, len(candidates) - 1,
-                                              min(_PATCH_SAMPLE, len(candidates))).astype(np.int64))]
-    adjacency = edge_adjacency(faces, len(points))
-
-    def flatness(r):
-        indptr, indices = kring_neighbors(points, adjacency, r, sample)
-        rows = np.concatenate([sample, indices])
-        owner = np.concatenate([np.arange(len(sample)), np.repeat(np.arange(len(sample)),
-                                                                  np.diff(indptr))])
-        q = points[rows] - points[sample][owner]          # about the vertex: no cancellation
-        count = np.bincount(owner, minlength=len(sample)).astype(np.float64)
-        mean = np.stack([np.bincount(owner, q[:, a], len(sample)) for a in range(3)], 1)
-        mean /= count[:, None]
-        d = q - mean[owner]
-        cov = np.einsum("ki,kj->kij", d, d)
-        cov = np.stack([np.bincount(owner, cov[:, i, j], len(sample))
-                        for i in range(3) for j in range(3)], 1).reshape(-1, 3, 3)
-        ev = np.linalg.eigvalsh(cov[count >= 4])
-        with np.errstate(invalid="ignore", divide="ignore"):
-            return float(np.nanmedian(ev[:, 0] / ev[:, 1])) if len(ev) else np.nan
-
+def _local_patch(radius, floor, flatness):
+    """``radius``, or smaller where its balls reach beyond a local patch of the surface: a
+    coarse torus (trimesh's 32 x 32 grid, tube radius 0.5) got a default radius of 1.05, whose
+    balls reach around the tube, and curvatures 19 % off, all marked valid. While
+    ``flatness(r)`` (the median over a sample of points of their balls' flatness, see
+    :func:`_median_flatness`) exceeds :data:`PATCH_FLATNESS`, the radius is divided by
+    sqrt 2, not below ``floor``, and only while that at least halves the flatness: a
+    surface's shape makes it fall like the squared radius, where noise makes it rise (noisy
+    data keep their radius)."""
     now = flatness(radius)
     while now > PATCH_FLATNESS and radius > floor:
         smaller = max(radius / math.sqrt(2.0), floor)
@@ -159,6 +132,66 @@ def _local_patch(points, faces, radius, floor):
             break
         radius, now = smaller, then
     return radius
+
+
+def _patch_sample(rows):
+    """Up to ``_PATCH_SAMPLE`` of the indices ``rows``, evenly spread over them."""
+    return rows[np.unique(np.linspace(0, len(rows) - 1,
+                                      min(_PATCH_SAMPLE, len(rows))).astype(np.int64))]
+
+
+def _kring_flatness(points, faces):
+    """``flatness(r)`` of a mesh for :func:`_local_patch`: its k-ring balls (the neighborhoods
+    its fits use) about a sample of its finite vertices in faces."""
+    from .kring import edge_adjacency, kring_neighbors
+
+    used = np.zeros(len(points), dtype=bool)
+    used[faces.ravel()] = True
+    sample = _patch_sample(np.flatnonzero(used & np.isfinite(points).all(axis=1)))
+    adjacency = edge_adjacency(faces, len(points))
+
+    def flatness(r):
+        indptr, indices = kring_neighbors(points, adjacency, r, sample)
+        owner = np.repeat(np.arange(len(sample)), np.diff(indptr))
+        return _median_flatness(points, sample, np.concatenate([sample, indices]),
+                                np.concatenate([np.arange(len(sample)), owner]))
+    return flatness
+
+
+def _ball_flatness(tree, points, most):
+    """``flatness(r)`` of a cloud for :func:`_local_patch`: balls in ``tree`` (over
+    ``points``) about a sample of the points, each its ``most`` nearest within r at most."""
+    sample = _patch_sample(np.arange(len(points)))
+
+    def flatness(r):
+        d, nb = tree.query(points[sample], k=min(most, len(points)),
+                           distance_upper_bound=r * (1.0 + 1e-12), workers=-1)
+        inside = d <= r
+        owner = np.nonzero(inside)[0]
+        return _median_flatness(points, sample, nb[inside], owner)
+    return flatness
+
+
+def _median_flatness(points, centres, rows, owner):
+    """Median over the balls of ``points[rows]`` (ball ``owner`` of each row, about
+    ``points[centres[owner]]``) of the smallest eigenvalue of their covariance over the middle
+    one: 0 for a flat patch, (curvature x radius)^2 / 12 for a small spherical cap, near 1 for a
+    ball holding a solid's whole section. Balls of fewer than 4 points are left out."""
+    m = len(centres)
+    q = points[rows] - points[centres][owner]        # about the centre: no cancellation
+    count = np.bincount(owner, minlength=m).astype(np.float64)
+    enough = count >= 4
+    if not enough.any():
+        return np.nan
+    mean = np.stack([np.bincount(owner, q[:, a], m) for a in range(3)], axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean /= count[:, None]
+    d = q - mean[owner]
+    cov = np.stack([np.bincount(owner, d[:, a] * d[:, b], m)
+                    for a in range(3) for b in range(3)], axis=1).reshape(-1, 3, 3)
+    ev = np.linalg.eigvalsh(cov[enough])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return float(np.nanmedian(ev[:, 0] / ev[:, 1]))
 
 
 def _ring_reach(points, faces, scale):
@@ -195,7 +228,10 @@ def _longest_edges(v, f, scale):
     return longest, used
 
 
-def _default_radius(p, target_neighbors, sample, seed):
+def _default_radius(p, target_neighbors, sample, seed, patch=True):
+    """The density rule of :func:`default_radius` on the finite points ``p``, grown where
+    too few points lie in its median ball and, with ``patch``, shrunk where its balls reach
+    beyond a local patch (not below half of it: a quarter of the points)."""
     target_neighbors = min(target_neighbors, MAX_BALL_FRACTION * len(p))
     k = max(1, min(16, len(p) - 1, int(target_neighbors)))
     rng = np.random.default_rng(seed)
@@ -208,8 +244,12 @@ def _default_radius(p, target_neighbors, sample, seed):
         return float("nan")
     radius = float(np.sqrt(target_neighbors / k * dk2))
     # the area density extrapolated from k neighbors to the target, checked where it was
-    return _grown_to_target(tree, probe, radius, target_neighbors) if target_neighbors > k \
-        else radius
+    if target_neighbors > k:
+        radius = _grown_to_target(tree, probe, radius, target_neighbors)
+    if patch:
+        radius = _local_patch(radius, 0.5 * radius,
+                              _ball_flatness(tree, p, 4 * int(math.ceil(target_neighbors))))
+    return radius
 
 
 def _grown_to_target(tree, probe, radius, target_neighbors):

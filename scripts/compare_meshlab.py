@@ -28,8 +28,9 @@ methods and options writes docs/accuracy_cases.md; anything else a temporary fol
 Groups: ``surfaces`` (clean and noisy torus, paraboloid, ellipsoid, cylinder K = 0; meshes),
 ``cnc`` (the six clouds of ../shared/bench/cnc under the paper's noise grid, mean |dH|, with
 their README's CNC figures beside), ``density`` (one-sided half sphere, density falling 25x),
-``icosahedra`` (subdivisions 0-2), ``spikes`` (sphere with 2 % scanner spikes). MeshLab runs
-on the mesh groups only.
+``icosahedra`` (subdivisions 0-2), ``coarse`` (trimesh's low-poly tori), ``spikes`` (sphere
+with 2 % scanner spikes), ``terrain`` (scan-line terrains). MeshLab runs on the mesh groups
+only.
 
 Sign and label normalisation (all methods are brought to meshcurv's convention: outward normal,
 convex positive, k1 >= k2); measured on a sphere and a torus with outward-wound faces:
@@ -497,7 +498,7 @@ def _reindex(faces, used):
 # Accuracy cases (--accuracy-cases): one group at a time, each against exact curvature
 # ---------------------------------------------------------------------------------------------
 
-ACCURACY_GROUPS = ("surfaces", "cnc", "density", "icosahedra", "spikes", "terrain")
+ACCURACY_GROUPS = ("surfaces", "cnc", "density", "icosahedra", "coarse", "spikes", "terrain")
 MESHLAB_NAMES = tuple(MESHLAB_METHODS)
 
 # CNC reference: mean |H - H_true| over the six clouds, the authors' code (Avg-Hexagram,
@@ -799,6 +800,47 @@ def group_icosahedra(methods, size, switches, timeout, **_):
     return rows
 
 
+# Coarse tori of trimesh.creation.torus: (major radius, minor radius, major x minor sections).
+COARSE_TORI = ((2.0, 0.5, 32, 32), (1.0, 0.2, 32, 32), (1.0, 0.3, 64, 16), (3.0, 1.0, 40, 20))
+
+
+def group_coarse(methods, size, switches, timeout, **_):
+    """Tori of ``trimesh.creation.torus`` coarse for their shape (:data:`COARSE_TORI`, its own
+    32 x 32 grid first): % valid, mean and max |dk| over all vertices, meshcurv at its default
+    radius on the mesh and on its points alone; MeshLab on the mesh, SDQF and APSS at
+    meshcurv's radius for the mesh."""
+    import trimesh
+
+    from meshcurv.surfaces import torus_at
+
+    rows = []
+    for major, minor, n_major, n_minor in COARSE_TORI[:2] if size == "smallest" else COARSE_TORI:
+        mesh = trimesh.creation.torus(major, minor, major_sections=n_major,
+                                      minor_sections=n_minor)
+        v = np.asarray(mesh.vertices, dtype=np.float64)
+        f = np.asarray(mesh.faces, dtype=np.int64)
+        truth = torus_at(v, major, minor)
+        everywhere = np.ones(len(v), dtype=bool)
+        case = f"torus {major:g} / {minor:g}, {n_major} x {n_minor} ({len(v)} vertices)"
+        runs = [("meshcurv", "meshcurv, mesh", f), ("meshcurv", "meshcurv, points", None)] \
+            if "meshcurv" in methods else []
+        runs += [(m, m, f) for m in _selected(methods) if m != "meshcurv"]
+        ball = None
+        for method, label, faces in runs:
+            if method != "meshcurv" and ball is None:
+                ball = float(_run("meshcurv", v, f, None, switches, timeout)["radius"])
+            r = _run(method, v, faces, None if method == "meshcurv" else ball, switches,
+                     timeout)
+            if label == "meshcurv, mesh":
+                ball = float(r["radius"])
+            rows.append(dict(group="coarse", case=case, method=label, radius=r["radius"],
+                             seconds=r["seconds"], status=r["status"],
+                             **_curvature_row(r["k1"], r["k2"], truth, everywhere)))
+        print(f"coarse {case}: " + ", ".join(f"{r['method']} {r['mean_dk']:.3g}"
+                                             for r in rows[-len(runs):]), flush=True)
+    return rows
+
+
 def sphere_with_spikes(subdivisions=5, noise=0.0005, spike_share=0.02, spike_range=(0.01, 0.04),
                        seed=SEED_SPIKES):
     """An icosphere (unit radius) with Gaussian noise along the normal (``noise`` x the
@@ -881,7 +923,7 @@ def group_terrain(methods, size, switches, timeout, **_):
 
 
 GROUP_RUNNERS = {"surfaces": group_surfaces, "cnc": group_cnc, "density": group_density,
-                 "icosahedra": group_icosahedra, "spikes": group_spikes,
+                 "icosahedra": group_icosahedra, "coarse": group_coarse, "spikes": group_spikes,
                  "terrain": group_terrain}
 
 
@@ -985,6 +1027,13 @@ GROUP_TEXT = {
                    "radius 1, k = 1); meshcurv at its default radius with the faces and on the "
                    "points alone; SDQF and APSS at meshcurv's default radius. A row is valid "
                    "where the method gave a finite estimate."),
+    "coarse": ("Coarse tori",
+               "`trimesh.creation.torus(major, minor, major_sections, minor_sections)` 2 / 0.5 "
+               "(32 x 32, trimesh's own grid), 1 / 0.2 (32 x 32), 1 / 0.3 (64 x 16), 3 / 1 "
+               "(40 x 20): few vertices around the tube, so that a ball of ~100 vertices "
+               "reaches around it. meshcurv at its default radius with the faces and on the "
+               "points alone; MeshLab on the mesh, SDQF and APSS at meshcurv's radius for the "
+               "mesh. Errors over all vertices against the exact torus."),
     "terrain": ("Airborne-scan-like terrains",
                 "z = 0.03 x^2 - 0.02 y^2 + 0.1 sin(2 pi x / wavelength) on [-10, 10]^2, "
                 "gentle (wavelength 4 pi, ~19 default radii) and bumpy (wavelength 3, ~4.5 "
@@ -1010,7 +1059,7 @@ GROUP_TEXT = {
 def _summary(results):
     """Markdown rows: per case of the mesh groups, meshcurv against the best MeshLab method."""
     out = []
-    for group in ("surfaces", "spikes"):
+    for group in ("surfaces", "coarse", "spikes"):
         rows = results.get(group, [])
         keys = list(dict.fromkeys((r["case"], r.get("noise")) for r in rows))
         for case, noise in keys:

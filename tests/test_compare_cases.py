@@ -165,6 +165,9 @@ def test_smallest_configuration_of_every_group_runs(tmp_path):
     cyl = [r for r in results["surfaces"] if r["case"].startswith("cylinder")]
     assert len(cyl) == 1 and np.isfinite(cyl[0]["max_K_over_k1sq"])
     assert len(results["icosahedra"]) == 6                      # 3 meshes x (mesh, points)
+    assert len(results["coarse"]) == 4                          # 2 tori x (mesh, points)
+    # trimesh's own torus grid: the default radius stays on the tube (mean |dk| 0.377 before)
+    assert all(r["valid"] == 1.0 and r["mean_dk"] < 0.05 for r in results["coarse"][:2])
     assert {r["method"] for r in results["spikes"]} == {"meshcurv, mesh", "meshcurv, points"}
     if CNC_DIR:
         modes = {(r["method"], r["radius_rule"]) for r in results["cnc"]}

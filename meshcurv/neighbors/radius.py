@@ -178,20 +178,23 @@ def _median_flatness(points, centres, rows, owner):
     one: 0 for a flat patch, (curvature x radius)^2 / 12 for a small spherical cap, near 1 for a
     ball holding a solid's whole section. Balls of fewer than 4 points are left out."""
     m = len(centres)
-    q = points[rows] - points[centres][owner]        # about the centre: no cancellation
-    count = np.bincount(owner, minlength=m).astype(np.float64)
-    enough = count >= 4
-    if not enough.any():
-        return np.nan
-    mean = np.stack([np.bincount(owner, q[:, a], m) for a in range(3)], axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        q = points[rows] - points[centres][owner]    # about the centre: no cancellation
+        count = np.bincount(owner, minlength=m).astype(np.float64)
+        mean = np.stack([np.bincount(owner, q[:, a], m) for a in range(3)], axis=1)
         mean /= count[:, None]
-    d = q - mean[owner]
-    cov = np.stack([np.bincount(owner, d[:, a] * d[:, b], m)
-                    for a in range(3) for b in range(3)], axis=1).reshape(-1, 3, 3)
-    ev = np.linalg.eigvalsh(cov[enough])
+        d = q - mean[owner]
+        cov = np.stack([np.bincount(owner, d[:, a] * d[:, b], m)
+                        for a in range(3) for b in range(3)], axis=1).reshape(-1, 3, 3)
+    # balls of 4 points or more, whose sums did not overflow (a far point's)
+    usable = (count >= 4) & np.isfinite(cov).all(axis=(1, 2))
+    if not usable.any():
+        return np.nan
+    ev = np.linalg.eigvalsh(cov[usable])
     with np.errstate(invalid="ignore", divide="ignore"):
-        return float(np.nanmedian(ev[:, 0] / ev[:, 1]))
+        ratio = ev[:, 0] / ev[:, 1]
+    ratio = ratio[np.isfinite(ratio)]
+    return float(np.median(ratio)) if len(ratio) else np.nan
 
 
 def _ring_reach(points, faces, scale):

@@ -811,6 +811,7 @@ def group_coarse(methods, size, switches, timeout, **_):
     meshcurv's radius for the mesh."""
     import trimesh
 
+    from meshcurv.neighbors import default_radius
     from meshcurv.surfaces import torus_at
 
     rows = []
@@ -825,14 +826,10 @@ def group_coarse(methods, size, switches, timeout, **_):
         runs = [("meshcurv", "meshcurv, mesh", f), ("meshcurv", "meshcurv, points", None)] \
             if "meshcurv" in methods else []
         runs += [(m, m, f) for m in _selected(methods) if m != "meshcurv"]
-        ball = None
+        ball = float(default_radius(v, faces=f))    # meshcurv's default radius for the mesh
         for method, label, faces in runs:
-            if method != "meshcurv" and ball is None:
-                ball = float(_run("meshcurv", v, f, None, switches, timeout)["radius"])
             r = _run(method, v, faces, None if method == "meshcurv" else ball, switches,
                      timeout)
-            if label == "meshcurv, mesh":
-                ball = float(r["radius"])
             rows.append(dict(group="coarse", case=case, method=label, radius=r["radius"],
                              seconds=r["seconds"], status=r["status"],
                              **_curvature_row(r["k1"], r["k2"], truth, everywhere)))

@@ -143,15 +143,16 @@ def _patch_sample(rows):
 def _kring_flatness(points, faces):
     """``flatness(r)`` of a mesh for :func:`_local_patch`: its k-ring balls (the neighborhoods
     its fits use) about a sample of its finite vertices in faces."""
-    from .kring import edge_adjacency, kring_neighbors
+    from .kring import KringWork, edge_adjacency, kring_neighbors
 
     used = np.zeros(len(points), dtype=bool)
     used[faces.ravel()] = True
     sample = _patch_sample(np.flatnonzero(used & np.isfinite(points).all(axis=1)))
     adjacency = edge_adjacency(faces, len(points))
+    work = KringWork(len(points))          # one set of stamps for every radius tried
 
     def flatness(r):
-        indptr, indices = kring_neighbors(points, adjacency, r, sample)
+        indptr, indices = kring_neighbors(points, adjacency, r, sample, work)
         owner = np.repeat(np.arange(len(sample)), np.diff(indptr))
         return _median_flatness(points, sample, np.concatenate([sample, indices]),
                                 np.concatenate([np.arange(len(sample)), owner]))

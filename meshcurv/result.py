@@ -9,7 +9,7 @@ import numpy as np
 from . import shape
 from .fit import constants
 
-__all__ = ["CurvatureResult", "Status", "CURVATURE_FIELDS", "curvature_fields"]
+__all__ = ["CurvatureResult", "Status", "CURVATURE_FIELDS", "curvature_fields", "oriented_like"]
 
 # Per-vertex curvature fields of every annotated file (PLY properties, LAS extra bytes).
 CURVATURE_FIELDS = shape.FIELDS + ("valid", "status", "d1x", "d1y", "d1z", "d2x", "d2y", "d2z",
@@ -144,4 +144,28 @@ def curvature_fields(result):
     used = result.radius_used
     out["radius_used"] = (np.where(out["valid"] == 1, float(result.radius), np.nan)
                           if used is None else np.asarray(used, dtype=np.float64))
+    return out
+
+
+def oriented_like(result, normals):
+    """``result`` with its rows whose normal faces away from ``normals`` ((n, 3), the rows'
+    reference normals) turned round: the normal negated, k1, k2 = -k2, -k1 and d1, d2 = d2, d1
+    (still d2 = n x d1). The same object where no row faces away.
+
+    >>> import meshcurv, numpy as np, trimesh
+    >>> res = meshcurv.principal_curvatures(trimesh.creation.icosphere(3), radius=0.5)
+    >>> turned = oriented_like(res, -res.normals)
+    >>> bool(res.valid.all() and np.allclose(turned.k1, -1.0) and np.allclose(turned.k2, -1.0))
+    True
+    """
+    with np.errstate(invalid="ignore"):
+        away = np.einsum("ij,ij->i", np.asarray(result.normals), np.asarray(normals)) < 0.0
+    if not away.any():
+        return result
+    out = type(result)(**{f: getattr(result, f) for f in result.__dataclass_fields__})
+    out.normals = np.where(away[:, None], -result.normals, result.normals)
+    out.k1 = np.where(away, -result.k2, result.k1)
+    out.k2 = np.where(away, -result.k1, result.k2)
+    out.d1 = np.where(away[:, None], result.d2, result.d1)
+    out.d2 = np.where(away[:, None], result.d1, result.d2)
     return out

@@ -46,9 +46,9 @@ from scipy.spatial import cKDTree
 
 from . import pipeline
 from .neighbors import power_of_two_scale, typical_extent
-from .result import Status
+from .result import Status, oriented_like
 
-__all__ = ["ladder", "select", "run_auto", "oriented_like", "LADDER_EXPONENTS", "NOISE_GAIN",
+__all__ = ["ladder", "select", "run_auto", "LADDER_EXPONENTS", "NOISE_GAIN",
            "NORMAL_GAIN", "MIN_SUPPORT", "MAX_ARC", "SMOOTH_NEIGHBORS", "corrected_rows"]
 
 # Ladder r_j = R0 * 2^(j / 2): from half the default ball's points (~50) to 8 times (~800;
@@ -267,30 +267,6 @@ def run_auto(v, f, given_normals, r0, query, plan, progress=False, radii=None,
     if at is not None:
         choice = choice[at]
     return assemble(results, choice, base=at_r0, at=at)
-
-
-def oriented_like(result, normals):
-    """``result`` with its rows whose normal faces away from ``normals`` ((n, 3), the rows'
-    reference normals) turned round: the normal negated, k1, k2 = -k2, -k1 and d1, d2 = d2, d1
-    (still d2 = n x d1). The same object where no row faces away.
-
-    >>> import meshcurv, numpy as np, trimesh
-    >>> res = meshcurv.principal_curvatures(trimesh.creation.icosphere(3), radius=0.5)
-    >>> turned = oriented_like(res, -res.normals)
-    >>> bool(res.valid.all() and np.allclose(turned.k1, -1.0) and np.allclose(turned.k2, -1.0))
-    True
-    """
-    with np.errstate(invalid="ignore"):
-        away = np.einsum("ij,ij->i", np.asarray(result.normals), np.asarray(normals)) < 0.0
-    if not away.any():
-        return result
-    out = type(result)(**{f: getattr(result, f) for f in result.__dataclass_fields__})
-    out.normals = np.where(away[:, None], -result.normals, result.normals)
-    out.k1 = np.where(away, -result.k2, result.k1)
-    out.k2 = np.where(away, -result.k1, result.k2)
-    out.d1 = np.where(away[:, None], result.d2, result.d1)
-    out.d2 = np.where(away[:, None], result.d1, result.d2)
-    return out
 
 
 def _with_smoothing_neighbors(v, query, k):

@@ -7,7 +7,7 @@ import pytest
 import meshcurv
 from meshcurv import scale, surfaces
 from meshcurv.neighbors import default_radius
-from meshcurv.result import CURVATURE_FIELDS, Status, curvature_fields
+from meshcurv.result import CURVATURE_FIELDS, Status, curvature_fields, oriented_like
 
 
 def _interior(surface, radius):
@@ -80,9 +80,11 @@ def test_auto_rows_equal_the_run_at_the_chosen_radius():
 
 
 def test_auto_rows_keep_the_default_radius_orientation():
-    # trimesh's coarse torus as a cloud: the ladder's smallest radius (0.37) orients every
+    # trimesh's coarse torus as a cloud: the ladder's smallest radius (0.37) oriented every
     # normal inward, and auto mixed its rows with outward ones (78 % of the signs wrong, mean
-    # |dk| 1.66); its rows are now read with the default radius' normals (0.036)
+    # |dk| 1.66); each radius now re-orients along its fitted normals where its plane fits
+    # misled the tree (test_orientation), and auto reads every radius' rows with the default
+    # radius' normals
     import trimesh
 
     v = trimesh.creation.torus(2.0, 0.5).vertices
@@ -92,15 +94,30 @@ def test_auto_rows_keep_the_default_radius_orientation():
     rho = np.hypot(v[:, 0], v[:, 1])
     k1, k2 = np.full(len(v), 2.0), (rho - 2.0) / (0.5 * rho)
     assert np.mean(0.5 * (np.abs(res.k1 - k1) + np.abs(res.k2 - k2))) < 0.05
-    # the smallest radius' own run, inward, read outward: k1 = 1 / 0.5 on the tube again
     run = meshcurv.principal_curvatures(v, radius=scale.ladder(res.radius)[0])
-    assert np.all(np.einsum("ij,ij->i", run.normals, base.normals) < 0)   # the case is tested
-    turned = scale.oriented_like(run, base.normals)
-    np.testing.assert_array_equal(turned.normals, -run.normals)
-    np.testing.assert_array_equal(turned.k1, -run.k2)
-    np.testing.assert_array_equal(turned.d2, run.d1)
-    assert abs(np.median(turned.k1) - 2.0) < 0.05
+    assert np.all(np.einsum("ij,ij->i", run.normals, base.normals) > 0)
+
+
+def test_oriented_like_turns_the_rows_facing_away():
+    import trimesh
+
+    run = meshcurv.principal_curvatures(trimesh.creation.torus(2.0, 0.5).vertices)
+    reference = run.normals.copy()
+    reference[::3] *= -1.0
+    turned = oriented_like(run, reference)
+    away = np.zeros(len(run), bool)
+    away[::3] = True
+    np.testing.assert_array_equal(turned.normals[away], -run.normals[away])
+    np.testing.assert_array_equal(turned.k1[away], -run.k2[away])
+    np.testing.assert_array_equal(turned.k2[away], -run.k1[away])
+    np.testing.assert_array_equal(turned.d1[away], run.d2[away])
+    np.testing.assert_array_equal(turned.d2[away], run.d1[away])
+    for name in ("normals", "k1", "k2", "d1", "d2"):
+        np.testing.assert_array_equal(getattr(turned, name)[~away], getattr(run, name)[~away])
+    # read with inward normals the tube's k1 = 1 / 0.5 becomes k2 = -2
+    assert np.all(np.abs(turned.k2[away] + 2.0) < 0.1)
     np.testing.assert_allclose(np.cross(turned.normals, turned.d1), turned.d2, atol=1e-12)
+    assert oriented_like(run, run.normals) is run
 
 
 def test_auto_rows_of_a_query_equal_those_of_the_whole_run():

@@ -388,6 +388,44 @@ def test_las_input_annotates_in_memory_to_las_and_ply(tmp_path, capsys, las_file
         np.testing.assert_array_equal(got, np.asarray(src[name]), err_msg=name)
 
 
+def test_las_dimensions_a_ply_has_no_type_for_are_carried_or_named(tmp_path, capsys):
+    """A '3f8' array of extra bytes goes to PLY as three properties; 64-bit integers as
+    doubles when every value fits in 53 bits, else they are left out and the command says so
+    (a LAS output keeps them: it copies the input's records)."""
+    laspy = pytest.importorskip("laspy")
+    from plyfile import PlyData
+
+    rng = np.random.default_rng(3)
+    xy = rng.uniform(-1.0, 1.0, size=(2000, 2))
+    las = laspy.LasData(laspy.LasHeader(point_format=6, version="1.4"))
+    las.header.scales = [1e-5] * 3
+    las.x, las.y, las.z = xy[:, 0], xy[:, 1], 0.3 * (xy ** 2).sum(axis=1)
+    las.add_extra_dims([laspy.ExtraBytesParams("offset", "3f8"),
+                        laspy.ExtraBytesParams("segment", "u8"),
+                        laspy.ExtraBytesParams("uid", "i8")])
+    offset = rng.normal(size=(2000, 3))
+    segment = np.arange(2000, dtype=np.uint64) + np.uint64(2 ** 53 - 2000)   # max 2^53 - 1
+    uid = np.arange(2000, dtype=np.int64) - 2 ** 62                          # beyond 2^53
+    las.offset, las.segment, las.uid = offset, segment, uid
+    las.write(str(tmp_path / "dims.las"))
+
+    code, _, err = run(capsys, "annotate", tmp_path / "dims.las", "-o", tmp_path / "dims.ply")
+    assert code == 0, err
+    vertex = PlyData.read(str(tmp_path / "dims.ply"))["vertex"]
+    for i in range(3):
+        assert _bits(vertex[f"scalar_offset_{i}"]) == _bits(offset[:, i])
+    assert vertex["scalar_segment"].dtype == np.float64
+    np.testing.assert_array_equal(vertex["scalar_segment"].astype(np.uint64), segment)
+    assert "scalar_uid" not in vertex.data.dtype.names
+    assert err.count("warning") == 1 and "uid" in err and "2^53" in err, err
+
+    code, _, err = run(capsys, "annotate", tmp_path / "dims.las", "-o", tmp_path / "dims.laz")
+    assert code == 0 and "warning" not in err, err
+    out = laspy.read(str(tmp_path / "dims.laz"))
+    np.testing.assert_array_equal(out.uid, uid)
+    np.testing.assert_array_equal(out.offset, offset)
+
+
 def test_tiling_flags_reach_annotate_tiled(tmp_path, capsys, las_file, monkeypatch,
                                            dask_cluster):
     from meshcurv import tiled

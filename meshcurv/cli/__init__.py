@@ -217,6 +217,8 @@ def _cmd_annotate(args):
     if s["n_nonfinite"]:
         print(f"meshcurv: warning: {s['n_nonfinite']} vertices have non-finite coordinates; "
               "their curvature is NaN", file=sys.stderr)
+    for note in s["not_carried"]:
+        print(f"meshcurv: warning: {args.input}: {note}", file=sys.stderr)
     print(_summary_line(s))
     print(orientation_line(s["orientation"], args.input, options))
     if args.preview:

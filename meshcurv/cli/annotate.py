@@ -185,7 +185,9 @@ def annotate_file(input_path, output_path, options=AnnotateOptions(), preview=No
     (:func:`radius_suffixes`); the normals, quality, colour and preview are the first radius's.
 
     Returns a dict of summary values (``n_vertices, n_faces, n_valid, radius, seconds`` and
-    ``orientation``, the result's note on how the normals got their sign; ``radii``,
+    ``orientation``, the result's note on how the normals got their sign; ``not_carried``,
+    one line each on what of the input the output cannot hold (:attr:`MeshData.notes`);
+    ``radii``,
     ``n_valid_per_radius`` and ``suffixes`` list every radius, ``suffixes`` None for one
     radius; ``n_valid``, ``radius`` and ``orientation`` are the first radius's).
     Raises :class:`meshcurv.io.MeshFileError` or ValueError (message names the file) for bad
@@ -233,7 +235,9 @@ def annotate_file(input_path, output_path, options=AnnotateOptions(), preview=No
         except BaseException:
             os.remove(output_path)  # all or nothing
             raise
+    kept_whole = io.file_extension(output_path) in (".las", ".laz")  # copies every dimension
     return {"input": os.fspath(input_path), "output": os.fspath(output_path),
+            "not_carried": [] if kept_whole else list(data.notes),
             "n_vertices": len(data.vertices),
             "n_faces": 0 if data.is_point_cloud else len(data.faces),
             "n_valid": n_valid[0], "n_nonfinite": len(data.vertices) - n_finite,

@@ -30,6 +30,8 @@ class MeshData:
     fields : dict of other per-vertex properties, name -> (n,) array (PLY only; e.g. the
         curvature fields of an annotated file)
     path : the file it came from
+    notes : one line each on what of the file ``fields`` could not hold (e.g. a LAS dimension
+        of 64-bit integers beyond 2^53, which no PLY property holds exactly)
     """
 
     vertices: np.ndarray
@@ -37,6 +39,7 @@ class MeshData:
     normals: np.ndarray = None
     fields: dict = dc_field(default_factory=dict)
     path: str = ""
+    notes: tuple = ()
 
     @property
     def is_point_cloud(self):

@@ -293,11 +293,42 @@ def read_las_points(path, chunk_size=DEFAULT_CHUNK):
     return xyz, nv
 
 
-def _ply_scalar(dtype):
-    """Whether a PLY vertex property can hold values of ``dtype``: integers of 8 to 32 bits,
-    floats of 32 or 64."""
-    return (dtype.kind in "iu" and dtype.itemsize <= 4) or (dtype.kind == "f"
-                                                            and dtype.itemsize in (4, 8))
+def _carried_dims(point_format, skip):
+    """``{ply name: (dimension name, element index or None)}`` of the dimensions of
+    ``point_format`` not named in ``skip`` (lower case) whose values a PLY property can hold,
+    or a float64 one once read (:func:`_ply_ready`): integers of 8 to 64 bits and floats of 32
+    or 64. An array of extra bytes ('3f8') gives one property per element,
+    ``scalar_<name>_<i>``."""
+    carried = {}
+    for d in point_format.dimensions:
+        if d.name.lower() in skip:
+            continue
+        base = np.dtype(d.dtype).base if d.dtype is not None else np.dtype(np.uint8)  # bits
+        if not (base.kind in "iu" or (base.kind == "f" and base.itemsize in (4, 8))):
+            continue
+        name = PLY_CARRY_PREFIX + re.sub(r"\s", "_", d.name)
+        if d.num_elements == 1:
+            carried[name] = (d.name, None)
+        else:
+            carried.update({f"{name}_{i}": (d.name, i) for i in range(d.num_elements)})
+    return carried
+
+
+def _ply_ready(fields):
+    """``fields`` with 64-bit integers (PLY has none) as float64 where that holds every value
+    exactly (|v| <= 2^53), and the one-line notes on those it cannot hold, which are left
+    out: ``(fields, notes)``."""
+    out, lost = {}, []
+    for name, values in fields.items():
+        if values.dtype.kind in "iu" and values.dtype.itemsize == 8:
+            if len(values) and (int(values.max()) > 2 ** 53 or int(values.min()) < -2 ** 53):
+                lost.append(name[len(PLY_CARRY_PREFIX):])
+                continue
+            values = values.astype(np.float64)
+        out[name] = values
+    notes = [f"64-bit integer dimension {name} holds values beyond 2^53, which no PLY "
+             f"property holds exactly: not carried (a LAS/LAZ output keeps it)" for name in lost]
+    return out, notes
 
 
 def read_las_cloud(path, chunk_size=DEFAULT_CHUNK, fields=CURVATURE_FIELDS, carry=False):
@@ -310,31 +341,29 @@ def read_las_cloud(path, chunk_size=DEFAULT_CHUNK, fields=CURVATURE_FIELDS, carr
     normals : (n, 3) float64 or None, when the file has normal dimensions
     found : dict name -> (n,) array, the dimensions of ``fields`` the file has (e.g. the
         curvature fields of an annotated file), in their stored type; with ``carry`` also
-        each other dimension a PLY property can hold (one value of 8 to 32 bits or a double:
-        intensity, classification, return numbers, GPS time, RGB, extra bytes), as
-        ``scalar_<name>`` (the spelling CloudCompare loads as a scalar field; whitespace in a
-        name, which a PLY property cannot hold, as ``_``)
+        each other integer or float dimension (intensity, classification, return numbers, GPS
+        time, RGB, extra bytes), as ``scalar_<name>`` (the spelling CloudCompare loads as a
+        scalar field; whitespace in a name, which a PLY property cannot hold, as ``_``; an
+        array of extra bytes as ``scalar_<name>_0``, ``_1`` ...), in its stored type
     """
     with open_las(path) as reader:
         point_format = reader.header.point_format
     names = list(point_format.extra_dimension_names)
     have = {n.lower(): n for n in names}
-    wanted = {f: have[f.lower()] for f in fields if f.lower() in have}
-    wanted.update({n: n for n in names if split_radius_suffix(n)[1]
+    wanted = {f: (have[f.lower()], None) for f in fields if f.lower() in have}
+    wanted.update({n: (n, None) for n in names if split_radius_suffix(n)[1]
                    and split_radius_suffix(n)[0] in fields and n not in wanted})
     if carry:
         skip = {"x", "y", "z"} | {n.lower() for n in (normal_dims(point_format) or ())}
-        skip |= {w.lower() for w in wanted.values()}
-        wanted.update({PLY_CARRY_PREFIX + re.sub(r"\s", "_", d.name): d.name
-                       for d in point_format.dimensions
-                       if d.name.lower() not in skip and d.num_elements == 1
-                       and _ply_scalar(np.dtype(d.dtype))})
+        skip |= {dim.lower() for dim, _ in wanted.values()}
+        wanted.update(_carried_dims(point_format, skip))
     xyz, nv, found = [], [], {f: [] for f in wanted}
     for _, p, n, rec in iter_las_chunks(path, chunk_size, with_records=True):
         xyz.append(p)
         nv.append(n)
-        for f, dim in wanted.items():
-            found[f].append(np.asarray(rec[dim]))
+        for f, (dim, i) in wanted.items():
+            values = np.asarray(rec[dim])
+            found[f].append(values if i is None else values[:, i])
     if not xyz:
         return np.zeros((0, 3)), None, {}
     return (np.concatenate(xyz), (None if nv[0] is None else np.concatenate(nv)),
@@ -498,7 +527,9 @@ def read_las(path):
     holds the :data:`CURVATURE_FIELDS` extra dimensions of an annotated file (also those of
     each radius, ``k1_r0p5``, see :func:`write_las_curvature`) and the file's other
     dimensions as ``scalar_<name>`` (``scalar_intensity``, ``scalar_classification`` ...: an
-    annotated PLY written from it carries them). Clouds larger
+    annotated PLY written from it carries them; arrays of extra bytes one property per
+    element, 64-bit integers as float64 where exact, else left out and named in ``notes``).
+    Clouds larger
     than memory go through :func:`meshcurv.tiled.annotate_tiled` instead.
     """
     require_laspy(path)
@@ -506,7 +537,9 @@ def read_las(path):
         xyz, normals, fields = read_las_cloud(path, fields=CURVATURE_FIELDS, carry=True)
     except LasReadError as exc:  # its message already names the file
         raise MeshFileError(first_line(exc)) from exc
-    return MeshData(vertices=xyz, normals=normals, fields=fields, path=path)
+    fields, notes = _ply_ready(fields)
+    return MeshData(vertices=xyz, normals=normals, fields=fields, path=path,
+                    notes=tuple(notes))
 
 
 def write_las(path, data, result, quality=None, colormap=None, clamp=None, suffixes=None):

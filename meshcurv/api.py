@@ -107,10 +107,15 @@ def no_estimate_reason(result, n_points, option="radius"):
     ``n_points`` is the number of finite input points; ``option`` names the radius as the
     caller's user knows it (e.g. "--radius"). Balls holding nearly every point mean a radius
     far too large (fits see a whole object, no surface patch); balls with few neighbors one
-    too small.
+    too small; given normals that are mostly NaN or off the surface, normals to estimate.
     """
     nn = np.asarray(result.n_neighbors)
     med = float(np.median(nn)) if len(nn) else 0.0
+    given = str(result.orientation).startswith("as given")
+    if given and len(nn) and np.mean(np.asarray(result.status) == Status.NO_NORMAL) > 0.5:
+        return ("most given normals are unusable (zero, NaN, or more than 60 degrees off the "
+                "plane fit of their neighbourhood: wrong, or from another frame?); have them "
+                "estimated instead (normals=None; on the command line --normals estimate)")
     if n_points > 2 and med >= 0.5 * (n_points - 1):
         return (f"the radius {result.radius:.6g} is far too large: each ball holds nearly every "
                 f"point (median {med:.0f} of {n_points}); try a much smaller {option}")

@@ -22,9 +22,10 @@ from .neighbors import (MAX_BALL_FRACTION, BallGrid, KringWork, ball_counts, bal
                         ball_neighbors, crowd_thinning, edge_adjacency, kring_counts,
                         kring_neighbors, spatial_order)
 from .neighbors.csr import ball_mean, count_within, csr_rows
+from .neighbors.radius import PATCH_FLATNESS
 from .normals import face_normal_error, face_vertex_normals, orient, orient_along, \
     orient_like, orient_mst, orient_towards, pca_normals, sphere_normals
-from .normals.pca import split_disagreement
+from .normals.pca import plane_agreement, split_disagreement
 from .normals.winding import coherent_faces
 from .result import CurvatureResult, Status, oriented_like
 
@@ -80,6 +81,13 @@ SHAPE_FALSE_DROP = 1e-3
 # 1e-3 where the curvature varies inside the ball: Table 2 paraboloid at radius 2), normals
 # with noise sigma_xi = 0.1 (the benchmark's) by ~0.14.
 BIAS_TILT_SCALE = 0.03
+
+# Given normals whose |cos| with the plane fit of their own neighborhood is below this (60
+# degrees off it) describe no surface there: the curvature about them is wildly wrong (a
+# sphere whose every normal is tilted by 45 / 60 / 75 degrees: median |dk| 0.53 / 0.85 / 9.1
+# on k = 1), so those rows get none (NO_NORMAL). A plane fit across a right-angled edge is 45
+# degrees from either face's normal, within it (:func:`_off_surface`).
+GIVEN_OFF_COS = 0.5
 
 # Vertices sampled to estimate the noise of given normals (:func:`given_normal_noise`): its
 # standard error is then about 2 % of the estimate.
@@ -772,6 +780,8 @@ class _Outputs:
         self.outlier_score = np.full(m, np.nan)
         # the radius of each row's estimate, as a multiple of the call's (retried rows: more)
         self.radius_factor = np.ones(m)
+        # rows whose given normal is far off their neighborhood's plane (:func:`_off_surface`)
+        self.off_surface = 0
 
     def flag_outliers(self):
         """No curvature, status OUTLIER, where the outlier score reaches the Tukey cutoff (the
@@ -821,6 +831,9 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2
     the weights, 1 on clean data); given normals keep theirs, unless they are refined like
     estimated ones (``refine_normals=True``: e.g. a tiled run's spanning-tree normals)."""
     b = len(xb)
+    if plan.normals == "given" and not plan.refine:
+        qb, off = _off_surface(search, xb, qb, indptr, indices, radius, point_weights)
+        out.off_surface += off
     noise = np.empty(b)
     start = qb.copy() if plan.refine else None
     # normals used as given: the bias correction's tilt test needs the quadric's normal about
@@ -876,6 +889,19 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2
     out.k1[pos], out.k2[pos], out.d1[pos], out.d2[pos] = k1, k2, d1, d2
     out.normals[pos], out.n_samples[pos], out.residual[pos] = qb, samples, residual
     out.n_neighbors[pos], out.noise[pos], out.status[pos] = nbrs, noise, status
+
+
+def _off_surface(search, xb, qb, indptr, indices, radius, point_weights):
+    """``(normals, count)``: the given normals ``qb`` (b, 3) with NaN rows where they are more
+    than 60 degrees (:data:`GIVEN_OFF_COS`) off the plane fit of their neighborhood, where
+    that ball is a patch of surface (:func:`meshcurv.normals.pca.plane_agreement` at
+    :data:`PATCH_FLATNESS`), and how many rows that is."""
+    agree = plane_agreement(search.points, xb, qb, indptr, indices, radius, PATCH_FLATNESS,
+                            point_weights)
+    with np.errstate(invalid="ignore"):
+        off = agree < GIVEN_OFF_COS
+    count = int(np.count_nonzero(off))
+    return (np.where(off[:, None], np.nan, qb) if count else qb), count
 
 
 def bias_noise(search, xb, qb, indptr, indices, radius, noise, point_weights=None):
@@ -1049,6 +1075,10 @@ def run_radii(v, f, given_normals, radii, query, plan, progress=False):
             out.flag_outliers()
         res = out.result(sc.radius)
         res.orientation = sc.note
+        if out.off_surface:
+            res.orientation += (f"; {out.off_surface} given normals are more than 60 degrees "
+                                f"off the plane fit of their neighbourhood (wrong, or from "
+                                f"another frame?): no estimate there (status NO_NORMAL)")
         if plan.normals == "mst":
             res = reoriented_by_fits(res, v, sc.start_normals, query, sc.search, block)
         results.append(res)

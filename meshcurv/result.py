@@ -23,7 +23,8 @@ class Status(IntEnum):
     - ``OK`` (0): estimated (``valid``).
     - ``NO_POSITION`` (1): the vertex's coordinates are NaN or infinite.
     - ``NO_NORMAL`` (2): its normal is zero, NaN or infinite (e.g. fewer than 3 points for a
-      plane fit, a vertex in no face).
+      plane fit, a vertex in no face), or, given, more than 60 degrees off the plane fit of
+      its neighborhood.
     - ``TOO_FEW_NEIGHBORS`` (3): fewer than ``min_points`` neighbors within the radius: no
       half-set can be fitted (an isolated point, a radius below the spacing); or, on a cloud
       with estimated normals, fewer than 11 within every radius tried (``sparse_retry``).

@@ -26,6 +26,27 @@ def _fit(owner, sel, w, phi, h, m, terms):
     return _solve(mat, rhs, np.bincount(owner[sel], minlength=m) + 1 >= terms)
 
 
+def _ball_covariance(points, query, indptr, indices, radius, weights=None):
+    """``(owner, offset, w, used, cov)``: each list entry's query row, its offset in units of
+    the radius, its weight and whether it counts (inside the ball, not the point itself,
+    weight > 0); and (m, 3, 3) the plane fit's covariance of each ball about its centroid,
+    the query point included with weight 1."""
+    m = len(query)
+    owner = np.repeat(np.arange(m), np.diff(indptr))
+    offset = (points[indices] - query[owner]) / radius
+    d2 = np.sum((points[indices] - query[owner]) ** 2, axis=1)
+    w = np.ones(len(indices)) if weights is None else weights[indices]
+    used = (d2 > 0) & (d2 <= radius * radius) & (w > 0)
+    wu = np.where(used, w, 0.0)
+    total = np.bincount(owner, wu, minlength=m) + 1.0
+    centroid = np.stack([np.bincount(owner, wu * offset[:, a], minlength=m)
+                         for a in range(3)], axis=1) / total[:, None]
+    cov = np.zeros((m, 3, 3))
+    np.add.at(cov, owner, wu[:, None, None] * offset[:, :, None] * offset[:, None, :])
+    cov = cov / total[:, None, None] - centroid[:, :, None] * centroid[:, None, :]
+    return owner, offset, w, used, cov
+
+
 def split_spec(points, query, indptr, indices, radius, weights=None):
     """The split disagreement in numpy: in the frame of the whole ball's :func:`pca_normals`
     (weighted; the query point included with weight 1), the quadric height fit (u, v, 1, u^2,
@@ -40,20 +61,9 @@ def split_spec(points, query, indptr, indices, radius, weights=None):
     t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
     t2 = np.cross(normal, t1)
     counts = np.diff(indptr)
-    owner = np.repeat(np.arange(m), counts)
+    owner, offset, w, used, cov = _ball_covariance(points, query, indptr, indices, radius,
+                                                   weights)
     position = np.arange(len(indices)) - np.repeat(indptr[:-1], counts)
-    offset = (points[indices] - query[owner]) / radius
-    d2 = np.sum((points[indices] - query[owner]) ** 2, axis=1)
-    w = np.ones(len(indices)) if weights is None else weights[indices]
-    used = (d2 > 0) & (d2 <= radius * radius) & (w > 0)
-    # the covariance of the plane fit, about the centroid, the query point with weight 1
-    wu = np.where(used, w, 0.0)
-    total = np.bincount(owner, wu, minlength=m) + 1.0
-    centroid = np.stack([np.bincount(owner, wu * offset[:, a], minlength=m)
-                         for a in range(3)], axis=1) / total[:, None]
-    cov = np.zeros((m, 3, 3))
-    np.add.at(cov, owner, wu[:, None, None] * offset[:, :, None] * offset[:, None, :])
-    cov = cov / total[:, None, None] - centroid[:, :, None] * centroid[:, None, :]
     lam = np.linalg.eigvalsh(np.where(np.isfinite(cov), cov, 0.0))
     with np.errstate(invalid="ignore", divide="ignore"):
         gap = lam[:, 1] / (lam[:, 1] - lam[:, 0])
@@ -126,3 +136,43 @@ def test_split_halves_of_a_clean_sphere_agree_where_plane_fits_of_them_tilt():
     # sphere's height is not quite a quadric), plane fits of the halves 2.2e-4
     assert np.nanmean(split) < 1e-7
     assert np.nanmean(1.0 - cos * cos) > 1e-4
+
+
+def agreement_spec(points, query, normals, indptr, indices, radius, flatness, weights=None):
+    """plane_agreement in numpy: the weighted covariance of the ball (the query point with
+    weight 1) about its centroid, its eigenvalues l1 <= l2 <= l3 and the smallest one's
+    eigenvector e; |normal . e| where l1 <= flatness l2 and l2 > 1e-6 l3, else NaN."""
+    owner, _, _, used, cov = _ball_covariance(points, query, indptr, indices, radius, weights)
+    lam, vec = np.linalg.eigh(cov)
+    cos = np.abs(np.einsum("ij,ij->i", normals, vec[:, :, 0]))
+    patch = (lam[:, 0] <= flatness * lam[:, 1]) & (lam[:, 1] > 1e-6 * lam[:, 2])
+    enough = np.bincount(owner, used, minlength=len(query)) + 1 >= 3
+    return np.where(patch & enough, cos, np.nan)
+
+
+@pytest.mark.parametrize("weighted", [False, True])
+def test_plane_agreement_equals_its_numpy_specification(weighted):
+    from meshcurv.normals.pca import plane_agreement
+
+    rng = np.random.default_rng(4)
+    # a bumpy sheet, a noise blob and a line of points: patches, no patch, no plane
+    sheet = rng.uniform(-1, 1, (1500, 3)) * [1, 1, 0]
+    sheet[:, 2] = 0.2 * np.sin(2 * sheet[:, 0]) + 0.01 * rng.normal(size=1500)
+    blob = rng.normal(size=(200, 3)) * 0.05 + [3.0, 0.0, 0.0]
+    line = np.column_stack([np.linspace(5, 6, 50), np.zeros(50), np.zeros(50)])
+    points = np.vstack([sheet, blob, line])
+    normals = rng.normal(size=points.shape)
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    normals[::97] = np.nan
+    radius = 0.2
+    grid = ball_grid(points, radius)
+    query = np.arange(len(points))
+    indptr, indices = ball_neighbors(grid, query, points, radius)
+    weights = rng.uniform(0, 1, len(points)) * (rng.uniform(size=len(points)) > 0.1) \
+        if weighted else None
+    got = plane_agreement(points, points, normals, indptr, indices, radius, 1 / 6, weights)
+    want = agreement_spec(points, points, normals, indptr, indices, radius, 1 / 6, weights)
+    np.testing.assert_array_equal(np.isnan(got), np.isnan(want))
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
+    assert np.isfinite(got[:1500]).mean() > 0.9          # the sheet: planes
+    assert np.isnan(got[1500:]).all()                    # blob and line: none

@@ -10,6 +10,7 @@ import pytest
 import meshcurv
 from meshcurv import cli, io, surfaces
 from meshcurv.normals.orient import PIECE_RULES, piece_signs
+from meshcurv.result import Status
 
 CNC = "/work/shared/bench/cnc"
 # The notes CurvatureResult.orientation gives for the two rules of a spanning-tree run.
@@ -427,7 +428,7 @@ def test_unoriented_given_normals_are_named_in_the_orientation_note():
     p = rng.normal(size=(4000, 3))
     p /= np.linalg.norm(p, axis=1, keepdims=True)
     noisy = p + rng.normal(scale=0.2, size=p.shape)
-    assert meshcurv.principal_curvatures(p, normals=noisy).orientation == "as given"
+    assert "face away" not in meshcurv.principal_curvatures(p, normals=noisy).orientation
     signs = np.where(rng.uniform(size=len(p)) < 0.5, -1.0, 1.0)
     note = meshcurv.principal_curvatures(p, normals=p * signs[:, None]).orientation
     share = int(note.split("as given; ")[1].split(" %")[0])
@@ -439,3 +440,42 @@ def test_unoriented_given_normals_are_named_in_the_orientation_note():
     flipped = s.normals * np.where(np.arange(len(s.normals)) % 2, -1.0, 1.0)[:, None]
     assert "face away" in meshcurv.principal_curvatures(s.vertices, s.faces,
                                                         normals=flipped).orientation
+
+
+def test_given_normals_far_off_the_surface_get_no_estimate(tmp_path, capsys):
+    # a given normal more than 60 degrees off the plane of its neighborhood describes no
+    # surface there: its row gets no estimate (NO_NORMAL) and the note counts them; normals
+    # tilted less keep their rows, and the other rows are as with good normals
+    rng = np.random.default_rng(5)
+    s = surfaces.sphere(1.0, subdivisions=4)
+
+    def tilted(normals, degrees):
+        side = np.cross(normals, rng.normal(size=normals.shape))
+        side /= np.linalg.norm(side, axis=1, keepdims=True)
+        a = np.radians(degrees)
+        return np.cos(a) * normals + np.sin(a) * side
+
+    bad = np.zeros(len(s.vertices), dtype=bool)
+    bad[rng.choice(len(bad), len(bad) // 10, replace=False)] = True
+    for faces in (s.faces, None):
+        given = s.normals.copy()
+        given[bad] = tilted(s.normals[bad], 75.0)
+        res = meshcurv.principal_curvatures(s.vertices, faces, normals=given)
+        assert (res.status[bad] == Status.NO_NORMAL).all()
+        assert np.isnan(res.k1[bad]).all() and np.isnan(res.normals[bad]).all()
+        assert res.valid[~bad].all()
+        np.testing.assert_allclose(res.k1[~bad], 1.0, atol=1e-6)
+        np.testing.assert_allclose(res.k2[~bad], 1.0, atol=1e-6)
+        assert f"; {bad.sum()} given normals are more than 60 degrees off" in res.orientation
+        # 40 degrees off: an estimate about that normal, as given
+        res = meshcurv.principal_curvatures(s.vertices, faces,
+                                            normals=tilted(s.normals, 40.0))
+        assert res.valid.all() and res.orientation == "as given"
+    # every normal off: the command line says why nothing was estimated, and what to do
+    side = tilted(s.normals, 90.0)
+    io.write_ply(str(tmp_path / "off.ply"), s.vertices, None,     # a cloud: its own normals
+                 {"nx": side[:, 0], "ny": side[:, 1], "nz": side[:, 2]})
+    code = cli.main(["annotate", str(tmp_path / "off.ply"), "-o", str(tmp_path / "out.ply")])
+    err = capsys.readouterr().err
+    assert code != 0 and "given normals are unusable" in err and "--normals estimate" in err, err
+    assert not (tmp_path / "out.ply").exists()

@@ -7,7 +7,7 @@ from numba import njit, prange
 
 from ..linalg import CHUNK, ball_offset, normal_frame, smallest_eigvec_jacobi3, solve_sym
 
-__all__ = ["pca_normals", "pca_normals_csr", "split_disagreement"]
+__all__ = ["pca_normals", "pca_normals_csr", "plane_agreement", "split_disagreement"]
 
 
 @njit(cache=True)
@@ -96,6 +96,41 @@ def pca_normals_csr(points, query_points, indptr, indices, radius, point_weights
                 out[q, 0] = ev[0]
                 out[q, 1] = ev[1]
                 out[q, 2] = ev[2]
+    return out
+
+
+@njit(parallel=True, cache=True)
+def plane_agreement(points, query_points, normals, indptr, indices, radius, flatness,
+                    point_weights=None):
+    """``|cos|`` (m,) of the angle between each query point's unit normal ``normals[q]`` and
+    the normal of the least-squares plane through its neighborhood (:func:`pca_normals_csr`'s),
+    whatever their signs: 1 where they agree, 0 where the normal lies in that plane. NaN where
+    the plane fit has none, the normal is not finite, or the ball is no patch of surface:
+    its covariance's smallest eigenvalue above ``flatness`` times the middle one (a blob of
+    noise), or the middle one below 1e-6 times the largest (one line of points: a spread
+    across it under a thousandth of its length), where the plane's normal is arbitrary.
+    Its numpy specification: ``agreement_spec`` in tests/test_normals_pca.py."""
+    m = query_points.shape[0]
+    out = np.full(m, np.nan)
+    r2max = radius * radius
+    inv_r = 1.0 / radius
+    nchunks = (m + CHUNK - 1) // CHUNK
+    for ch in prange(nchunks):
+        cov = np.empty((3, 3))
+        nrm = np.empty(3)
+        for q in range(ch * CHUNK, min(m, (ch + 1) * CHUNK)):
+            if not _plane_normal(points, indices, indptr[q], indptr[q + 1], query_points[q, 0],
+                                 query_points[q, 1], query_points[q, 2], r2max, inv_r,
+                                 point_weights, cov, nrm):
+                continue
+            l1 = min(cov[0, 0], cov[1, 1], cov[2, 2])
+            l2 = max(min(cov[0, 0], cov[1, 1]), min(max(cov[0, 0], cov[1, 1]), cov[2, 2]))
+            l3 = max(cov[0, 0], cov[1, 1], cov[2, 2])
+            if not (l1 <= flatness * l2 and l2 > 1e-6 * l3):
+                continue
+            cos = abs(normals[q, 0] * nrm[0] + normals[q, 1] * nrm[1] + normals[q, 2] * nrm[2])
+            if np.isfinite(cos):
+                out[q] = cos
     return out
 
 

@@ -12,7 +12,7 @@ def as_arrays(vertices, faces=None, normals=None):
     for an empty face list: the points are then a cloud); ``nv`` (n, 3) float64, or None. A
     trimesh.Trimesh supplies vertices and faces, a trimesh.PointCloud its points (a
     trimesh.Scene is refused: it is no one surface). Raises ValueError (one line) for wrong
-    shapes, non-integer faces and face indices out of range.
+    shapes, complex numbers, non-integer faces and face indices out of range.
     """
     if hasattr(vertices, "geometry") and hasattr(vertices, "graph"):
         count = len(vertices.geometry)
@@ -25,7 +25,7 @@ def as_arrays(vertices, faces=None, normals=None):
         vertices = vertices.vertices
     elif hasattr(vertices, "vertices"):          # a trimesh.PointCloud: its points
         vertices = vertices.vertices
-    v = np.asarray(vertices, dtype=np.float64)
+    v = _real(vertices, "vertices")
     if v.ndim != 2 or v.shape[1] != 3:
         raise ValueError(f"vertices must be an (n, 3) array, got shape {v.shape}")
     v = np.ascontiguousarray(v)
@@ -47,7 +47,15 @@ def as_arrays(vertices, faces=None, normals=None):
             f = None            # no faces (trimesh.Trimesh(vertices=points)): a point cloud
     nv = None
     if normals is not None:
-        nv = np.asarray(normals, dtype=np.float64)
+        nv = _real(normals, "normals")
         if nv.shape != v.shape:
             raise ValueError(f"normals must have the shape of vertices {v.shape}, got {nv.shape}")
     return v, f, nv
+
+
+def _real(values, name):
+    """``values`` as float64; complex ones refused (numpy would drop their imaginary part)."""
+    a = np.asarray(values)
+    if np.iscomplexobj(a):
+        raise ValueError(f"{name} must be real numbers, got {a.dtype}")
+    return np.asarray(a, dtype=np.float64)

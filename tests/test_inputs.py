@@ -40,3 +40,12 @@ def test_no_faces_is_a_point_cloud():
         assert np.array_equal(res.k1, plain.k1, equal_nan=True)
         assert res.valid.all()
 
+
+
+def test_complex_coordinates_are_refused_in_one_line():
+    # numpy's float64 conversion would drop the imaginary parts with a ComplexWarning
+    p = trimesh.creation.icosphere(2).vertices
+    with pytest.raises(ValueError, match="vertices must be real numbers, got complex128"):
+        meshcurv.principal_curvatures(p.astype(complex))
+    with pytest.raises(ValueError, match="normals must be real numbers"):
+        meshcurv.principal_curvatures(p, normals=(p + 0j))

@@ -95,9 +95,15 @@ GIVEN_SAMPLE = 4096
 
 # Share of sampled points whose given normal faces away from most of their neighbors' above
 # which the result's orientation note says so (:func:`facing_away`): 0 on consistently
-# oriented normals over smooth surfaces, about one half for unoriented ones; 1 % of the
-# normals flipped at random gives about 1 %.
+# oriented normals, about a third for unoriented ones (more than 3 of 6 coin flips: 22 / 64);
+# 1 % of the normals flipped at random gives about 1 % (the flipped points).
 GIVEN_AWAY_SHARE = 0.05
+# The neighbors :func:`facing_away` compares a normal with: its nearest few, and only those
+# whose normals are within 60 degrees of its own or of its opposite (|cos| > 1/2), whose
+# sides therefore say something. Over a whole ball, a coarse shape's normals turn by more
+# than 90 degrees: the corners of a cube, a 32-section cylinder and an annulus read as 100 %,
+# 100 % and 50 % facing away with consistent outward normals.
+AWAY_NEIGHBORS = 6
 
 # Radii, as multiples of the call's, at which :func:`retry_sparse` re-estimates the vertices
 # whose ball held too few points, each at the smallest that serves (the larger the ball, the
@@ -561,10 +567,10 @@ def _tree_block(nv, graph, v, radius, search, pos, indptr, indices, point_weight
     graph[pos] = _graph_rows(v[pos], search, indptr, indices)
 
 
-def _graph_rows(xb, search, indptr, indices):
-    """The spanning tree graph's rows (b, TREE_NEIGHBORS) int32 of the points ``xb`` (b, 3):
-    the vertex indices of their nearest neighbors in their lists, -1 for none."""
-    near = orient.nearest_in_lists(search.points, xb, indptr, indices, TREE_NEIGHBORS)
+def _graph_rows(xb, search, indptr, indices, k=TREE_NEIGHBORS):
+    """The spanning tree graph's rows (b, k) of the points ``xb`` (b, 3): the vertex indices
+    of their ``k`` nearest neighbors in their lists, nearest first, -1 for none."""
+    near = orient.nearest_in_lists(search.points, xb, indptr, indices, k)
     return near if search.rank is None else np.where(near >= 0, search.rank[near], -1)
 
 
@@ -624,7 +630,7 @@ def _start_normals(v, f, given, radius, search, finite, plan, progress, point_we
     (:func:`meshcurv.normals.winding.coherent_faces`), ``turned`` faces of the input's turned
     to make it so (the note says how many)."""
     if plan.normals == "given":
-        return given, None, _given_note(given, search, finite), None
+        return given, None, _given_note(given, v, search, finite), None
     if plan.normals == "mst":
         normals, note = _spanning_tree_normals(v, radius, search, finite, progress,
                                                point_weights)
@@ -643,30 +649,31 @@ def _start_normals(v, f, given, radius, search, finite, plan, progress, point_we
     return (face_normals if plan.normals == "faces" else None), face_normals, note, weight
 
 
-def facing_away(given, search, rows, size=GIVEN_SAMPLE):
-    """Share of up to ``size`` of the vertices ``rows`` whose given normal (``given`` (n, 3))
-    faces away (negative dot product) from the normals of more than half of their neighbors:
-    near 0 for normals oriented consistently over a smooth surface, near one half for
-    unoriented ones (a plane fit's sign left as it fell); NaN where none was sampled."""
+def facing_away(given, v, search, rows, size=GIVEN_SAMPLE):
+    """Share of up to ``size`` of the vertices ``rows`` of ``v`` whose given normal (``given``
+    (n, 3)) faces away (dot product below -1/2) from the normals of more than half of those
+    of its :data:`AWAY_NEIGHBORS` nearest neighbors whose normals lie near its line (|dot|
+    above 1/2): near 0 for normals oriented consistently, about a third for unoriented ones
+    (a plane fit's sign left as it fell: more than 3 of 6 coin flips); NaN where none was
+    sampled."""
     sample = rows[_sample_queries(len(rows), size)]
     indptr, indices = search.neighbors(sample)
-    nbr = indices if search.rank is None else search.rank[indices]
-    own = np.repeat(np.arange(len(sample)), np.diff(indptr))
+    near = _graph_rows(v[sample], search, indptr, indices, AWAY_NEIGHBORS)
     with np.errstate(invalid="ignore"):
-        dots = np.einsum("ij,ij->i", given[sample[own]], given[nbr])
-    usable = (nbr != sample[own]) & np.isfinite(dots)
-    counted = np.bincount(own[usable], minlength=len(sample))
-    away = np.bincount(own[usable & (dots < 0.0)], minlength=len(sample))
+        dots = np.einsum("ij,ikj->ik", given[sample], given[np.maximum(near, 0)])
+    usable = (near >= 0) & (np.abs(dots) > 0.5)
+    counted = usable.sum(axis=1)
+    away = (usable & (dots < -0.5)).sum(axis=1)
     seen = counted > 0
     return float(np.mean(away[seen] > 0.5 * counted[seen])) if seen.any() else np.nan
 
 
-def _given_note(given, search, finite):
+def _given_note(given, v, search, finite):
     """``CurvatureResult.orientation`` for normals used as given: "as given", and where many
     of them face away from their neighbors' (:func:`facing_away` at least
     ``GIVEN_AWAY_SHARE``), that the curvature's signs follow each of them."""
     rows = np.arange(len(given)) if finite is None else finite
-    share = facing_away(given, search, rows) if len(rows) else np.nan
+    share = facing_away(given, v, search, rows) if len(rows) else np.nan
     if not share >= GIVEN_AWAY_SHARE:
         return "as given"
     return (f"as given; {100 * share:.0f} % of the points sampled face away from most of "

@@ -432,7 +432,7 @@ def test_unoriented_given_normals_are_named_in_the_orientation_note():
     signs = np.where(rng.uniform(size=len(p)) < 0.5, -1.0, 1.0)
     note = meshcurv.principal_curvatures(p, normals=p * signs[:, None]).orientation
     share = int(note.split("as given; ")[1].split(" %")[0])
-    assert 40 <= share <= 60, note
+    assert 25 <= share <= 45, note      # more than 3 of 6 neighbours by coin flips: 34 %
     # a mesh, with its k-rings
     s = surfaces.torus(2.0, 0.5, n_major=60, n_minor=15)
     assert meshcurv.principal_curvatures(s.vertices, s.faces,
@@ -440,6 +440,14 @@ def test_unoriented_given_normals_are_named_in_the_orientation_note():
     flipped = s.normals * np.where(np.arange(len(s.normals)) % 2, -1.0, 1.0)[:, None]
     assert "face away" in meshcurv.principal_curvatures(s.vertices, s.faces,
                                                         normals=flipped).orientation
+    # coarse shapes' consistent normals turn by more than 90 degrees across a ball: only the
+    # nearest neighbours whose normals lie near a point's line say anything about its side
+    # (cube corners, a 32-section cylinder, an annulus read as 100 %, 100 %, 50 % facing away)
+    import trimesh
+    for mesh in (trimesh.creation.box(), trimesh.creation.cylinder(1, 3, sections=32),
+                 trimesh.creation.annulus(0.5, 1, 2)):
+        assert meshcurv.principal_curvatures(
+            mesh.vertices, mesh.faces, normals=mesh.vertex_normals).orientation == "as given"
 
 
 def test_given_normals_far_off_the_surface_get_no_estimate(tmp_path, capsys):

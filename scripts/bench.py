@@ -382,6 +382,7 @@ def stage_times(v, f, normals, radius):
     call's time is numpy and Python glue. Returns ``{mode: {stage: seconds}}``.
     """
     import meshcurv
+    from meshcurv import pipeline
     from meshcurv.fit import fused, jet, outliers
     from meshcurv.neighbors import grid, kring
     from meshcurv.normals import orient, pca, sphere
@@ -397,6 +398,9 @@ def stage_times(v, f, normals, radius):
         called = {name for fn in kernels.values() for name in fn.py_func.__code__.co_names}
         originals.update({(module, name): fn for name, fn in kernels.items()
                           if not name.startswith("_") and name not in called})
+    # and where the pipeline holds a kernel under its own name (from ... import name)
+    originals.update({(pipeline, name): fn for (_, name), fn in list(originals.items())
+                      if getattr(pipeline, name, None) is fn})
 
     def timed(name, fn):
         def call(*args, **kwargs):

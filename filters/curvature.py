@@ -118,8 +118,10 @@ def compute_curvature_cga_per_vertex(self, radius=None, ndirections=8, neighborh
     -------
     dict
         ``radius_used`` (model units), ``n_vertices``, ``n_valid``, ``n_invalid``,
-        ``quality_field``, ``color_min``, ``color_max`` and, over the valid vertices,
-        ``<field>_mean``, ``<field>_min``, ``<field>_max`` for every field.
+        ``quality_field``, ``color_min``, ``color_max``, ``orientation`` (how the normals got
+        their sign, and what was found wrong with given ones: ``CurvatureResult.orientation``)
+        and, over the valid vertices, ``<field>_mean``, ``<field>_min``, ``<field>_max`` for
+        every field.
 
     Examples
     --------
@@ -153,7 +155,8 @@ def compute_curvature_cga_per_vertex(self, radius=None, ndirections=8, neighborh
     ok = res.valid
     summary = {"radius_used": float(res.radius), "n_vertices": int(len(v)),
                "n_valid": int(ok.sum()), "n_invalid": int((~ok).sum()),
-               "quality_field": quality, "color_min": float(lo), "color_max": float(hi)}
+               "quality_field": quality, "color_min": float(lo), "color_max": float(hi),
+               "orientation": res.orientation}
     for name, values in fields.items():
         x = values[ok]
         summary[f"{name}_mean"] = float(x.mean()) if x.size else float("nan")

@@ -67,6 +67,7 @@ def _check_against_api(ms, res, quality, summary, vertices, faces):
     assert summary["n_valid"] == int(ok.sum()) and summary["n_invalid"] == int((~ok).sum())
     assert summary["radius_used"] == res.radius
     assert summary["quality_field"] == quality
+    assert summary["orientation"] == res.orientation
     for name in FIELDS:
         x = getattr(res, name)[ok]
         assert summary[f"{name}_mean"] == pytest.approx(x.mean(), rel=1e-12)

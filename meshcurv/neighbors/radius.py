@@ -110,7 +110,7 @@ def default_radius(points, target_neighbors=100, sample=20000, seed=0, faces=Non
     if mesh and np.isfinite(radius):
         v = np.asarray(points, dtype=np.float64)
         f = np.asarray(faces, dtype=np.int64)
-        floor = RING_MARGIN * _ring_reach(v, f, 1.0)
+        floor = RING_MARGIN * _ring_reach(v, f)
         radius = _local_patch(max(radius, floor), floor, _kring_flatness(v, f))
     return radius
 
@@ -198,20 +198,20 @@ def _median_flatness(points, centres, rows, owner):
     return float(np.median(ratio)) if len(ratio) else np.nan
 
 
-def _ring_reach(points, faces, scale):
+def _ring_reach(points, faces):
     """Median over the vertices of ``faces`` of their longest edge (model units; edges of NaN
-    vertices left out; lengths measured on coordinates times the power of two ``scale``)."""
+    vertices left out; coordinates whose squares overflow are scaled by the caller,
+    :func:`default_radius`)."""
     longest, used = _longest_edges(np.asarray(points, dtype=np.float64),
-                                   np.asarray(faces, dtype=np.int64), float(scale))
+                                   np.asarray(faces, dtype=np.int64))
     used = longest[used]
     return float(np.median(used)) if len(used) else 0.0
 
 
 @njit(cache=True)
-def _longest_edges(v, f, scale):
+def _longest_edges(v, f):
     """``(longest, used)``, (n,) each: the length of each vertex's longest finite edge of the
-    triangles ``f`` (the norm of the difference of the coordinates times ``scale``, over
-    ``scale``), and whether it has one. One pass over the faces: a per-vertex maximum by
+    triangles ``f``, and whether it has one. One pass over the faces: a per-vertex maximum by
     ``np.maximum.at`` and the used vertices by ``np.unique`` took 1.4 s at 250k vertices."""
     longest = np.zeros(len(v))
     used = np.zeros(len(v), dtype=np.bool_)
@@ -219,10 +219,10 @@ def _longest_edges(v, f, scale):
         for e in range(3):
             a = f[t, e]
             b = f[t, (e + 1) % 3]
-            d0 = v[a, 0] * scale - v[b, 0] * scale
-            d1 = v[a, 1] * scale - v[b, 1] * scale
-            d2 = v[a, 2] * scale - v[b, 2] * scale
-            length = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) / scale
+            d0 = v[a, 0] - v[b, 0]
+            d1 = v[a, 1] - v[b, 1]
+            d2 = v[a, 2] - v[b, 2]
+            length = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
             if not np.isfinite(length):
                 continue
             longest[a] = max(longest[a], length)

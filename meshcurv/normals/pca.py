@@ -70,6 +70,14 @@ def _plane_normal(points, indices, lo, hi, x0, x1, x2, r2max, inv_r, point_weigh
     return True
 
 
+@njit(cache=True)
+def _sorted_eigenvalues(cov):
+    """``(l1, l2, l3)``, ascending: the eigenvalues :func:`_plane_normal` leaves on the
+    diagonal of ``cov``."""
+    a, b, c = cov[0, 0], cov[1, 1], cov[2, 2]
+    return min(a, b, c), max(min(a, b), min(max(a, b), c)), max(a, b, c)
+
+
 @njit(parallel=True, cache=True)
 def pca_normals_csr(points, query_points, indptr, indices, radius, point_weights=None):
     """Unit normals (m, 3) of the least-squares plane through each query point's neighbors.
@@ -123,9 +131,7 @@ def plane_agreement(points, query_points, normals, indptr, indices, radius, flat
                                  query_points[q, 1], query_points[q, 2], r2max, inv_r,
                                  point_weights, cov, nrm):
                 continue
-            l1 = min(cov[0, 0], cov[1, 1], cov[2, 2])
-            l2 = max(min(cov[0, 0], cov[1, 1]), min(max(cov[0, 0], cov[1, 1]), cov[2, 2]))
-            l3 = max(cov[0, 0], cov[1, 1], cov[2, 2])
+            l1, l2, l3 = _sorted_eigenvalues(cov)
             if not (l1 <= flatness * l2 and l2 > 1e-6 * l3):
                 continue
             cos = abs(normals[q, 0] * nrm[0] + normals[q, 1] * nrm[1] + normals[q, 2] * nrm[2])
@@ -219,8 +225,7 @@ def split_disagreement(points, query_points, indptr, indices, radius, point_weig
             if not _plane_normal(points, indices, lo, hi, x0, x1, x2, r2max, inv_r,
                                  point_weights, cov, nrm):
                 continue
-            l1 = min(cov[0, 0], cov[1, 1], cov[2, 2])
-            l2 = max(min(cov[0, 0], cov[1, 1]), min(max(cov[0, 0], cov[1, 1]), cov[2, 2]))
+            l1, l2, _ = _sorted_eigenvalues(cov)
             normal_frame(nrm[0], nrm[1], nrm[2], frame)
             if not _height_fit(points, indices, lo, hi, 1, x0, x1, x2, r2max, inv_r,
                                point_weights, frame, _QUADRIC_TERMS, flat, phi, mat, rhs, sol):

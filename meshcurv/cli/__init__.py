@@ -196,15 +196,14 @@ def _cmd_annotate(args):
                            f"{', '.join(sorted(io.WRITERS))}", 2)
     if args.preview is not None and io.file_extension(args.preview) != ".png":
         raise CommandError(f"{args.preview}: --preview must be a .png file", 2)
-    las_ext = (".las", ".laz")
-    if io.file_extension(args.output) in las_ext and io.file_extension(args.input) not in las_ext:
+    if io.las.is_las(args.output) and not io.las.is_las(args.input):
         raise CommandError(f"{args.output}: LAS/LAZ output needs a LAS/LAZ input (its points "
                            "are copied with added curvature fields); write .ply", 2)
     try:
         io.check_distinct(args.input, args.output)
     except io.MeshFileError as exc:
         raise CommandError(str(exc), 2) from None
-    if io.file_extension(args.output) in las_ext:
+    if io.las.is_las(args.output):
         suffixes = radius_suffixes(options.radius)
         try:  # a radius too long for LAS names is the command line's error
             io.las.new_dimension_names(suffixes)

@@ -131,7 +131,7 @@ def orientation_for(input_path, options):
     do), else "mst" (one sign per connected piece: outward if closed, towards +z if open)."""
     if options.viewpoint is not None:
         return options.viewpoint
-    return "+z" if io.file_extension(input_path) in (".las", ".laz") else "mst"
+    return "+z" if io.las.is_las(input_path) else "mst"
 
 
 def orientation_line(note, input_path, options):
@@ -235,9 +235,9 @@ def annotate_file(input_path, output_path, options=AnnotateOptions(), preview=No
         except BaseException:
             os.remove(output_path)  # all or nothing
             raise
-    kept_whole = io.file_extension(output_path) in (".las", ".laz")  # copies every dimension
     return {"input": os.fspath(input_path), "output": os.fspath(output_path),
-            "not_carried": [] if kept_whole else list(data.notes),
+            # a LAS/LAZ output copies every dimension of its LAS/LAZ input
+            "not_carried": [] if io.las.is_las(output_path) else list(data.notes),
             "n_vertices": len(data.vertices),
             "n_faces": 0 if data.is_point_cloud else len(data.faces),
             "n_valid": n_valid[0], "n_nonfinite": len(data.vertices) - n_finite,

@@ -43,9 +43,8 @@ def check_las_output(in_path, out_path, suffixes=None):
 
 def _check_tiled_arguments(args, options):
     """Raise CommandError (exit 2) for what a tiled run cannot do, before any file is read."""
-    las_ext = (".las", ".laz")
     for path, what in ((args.input, "input"), (args.output, "output")):
-        if io.file_extension(path) not in las_ext:
+        if not io.las.is_las(path):
             raise CommandError(f"{path}: --tile-size and --dask-scheduler need a .las or .laz "
                                f"{what} (for many mesh files use: meshcurv batch "
                                "--dask-scheduler)", 2)

@@ -55,7 +55,8 @@ from .atomic import atomic_write, check_distinct
 from .data import MeshData, MeshFileError, file_extension, first_line, split_radius_suffix
 
 __all__ = ["LasReadError", "CURVATURE_FIELDS", "NORMAL_FIELDS", "NAME_LIMIT", "DEFAULT_CHUNK",
-           "las_point_count", "open_las", "normal_dims", "iter_las_chunks", "read_las_points",
+           "is_las", "las_point_count", "open_las", "normal_dims", "iter_las_chunks",
+           "read_las_points",
            "read_las_cloud", "result_fields", "output_version", "check_paths",
            "new_dimension_names",
            "check_annotatable", "annotate_las", "write_las_curvature", "require_laspy",
@@ -85,7 +86,7 @@ class LasReadError(OSError):
     """A LAS/LAZ file that cannot be read (missing, truncated, corrupt); the message names it."""
 
 
-def _is_las(path):
+def is_las(path):
     """Whether ``path`` ends in .las or .laz (any case)."""
     return file_extension(path) in (".las", ".laz")
 
@@ -121,7 +122,7 @@ def open_las(path):
     """
     import laspy
 
-    if not _is_las(path):
+    if not is_las(path):
         raise ValueError(f"{path}: expected a .las or .laz file")
     _check_vlr_count(path)
     try:
@@ -392,7 +393,7 @@ def _field_types(names, float_type):
 
 def check_paths(in_path, out_path):
     """ValueError unless ``out_path`` is a .las/.laz file; MeshFileError when it is the input."""
-    if not _is_las(out_path):
+    if not is_las(out_path):
         raise ValueError(f"{out_path}: the output must be a .las or .laz file")
     check_distinct(in_path, out_path)
 
@@ -553,7 +554,7 @@ def write_las(path, data, result, quality=None, colormap=None, clamp=None, suffi
     ``result`` may be a list of results, one per radius, with ``suffixes`` (see
     :func:`write_las_curvature`).
     """
-    if not _is_las(data.path):
+    if not is_las(data.path):
         raise MeshFileError(f"{path}: LAS/LAZ output adds fields to the points of a LAS/LAZ "
                             f"input, but the input is {data.path or 'in memory'}; write .ply")
     check_distinct(data.path, path)

@@ -135,6 +135,18 @@ def test_closed_clouds_point_outward_at_the_defaults(name):
     assert_signs_right(res, normals, mean)
 
 
+@pytest.mark.parametrize("name", ["terrain", "dome"])
+@pytest.mark.parametrize("unit", [1e-3, 1e3])
+def test_one_sided_views_face_up_in_any_unit(name, unit):
+    """The same views in other units (a 10 m terrain in kilometres, a dome in millimetres): the
+    pieces' areas were once compared with 1.0, so views smaller than a unit square of area
+    were taken as closed and the terrain pointed down."""
+    points, normals, mean = OPEN_VIEWS[name]()
+    res = meshcurv.principal_curvatures(points * unit)
+    assert res.orientation == OPEN
+    assert_signs_right(res, normals, mean)
+
+
 def test_each_connected_piece_takes_its_own_rule():
     """A closed sphere and, far from it, an open terrain in one cloud: one sign each."""
     sp, sn, sm = sphere_part(3000)
@@ -155,6 +167,12 @@ def test_piece_signs_rules():
     sign, rule = piece_signs(count, normal_sum, score)
     assert sign.tolist() == [1, -1, -1, 1, -1]
     assert rule.tolist() == [0, 1, 2, 1, 0]
+    # areas in any unit (the sums of a tiled run are in model units squared): the same rules
+    for unit in (1e-12, 1e12):
+        sign, rule = piece_signs(np.multiply(count, unit), np.multiply(normal_sum, unit), score)
+        assert sign.tolist() == [1, -1, -1, 1, -1] and rule.tolist() == [0, 1, 2, 1, 0]
+    # a piece without area (isolated points) is left as it is
+    assert piece_signs([0.0], [[0.0, 0.0, 0.0]], [0.0])[0].tolist() == [1.0]
 
 
 def test_plus_z_orients_every_normal_up_on_its_own():

@@ -100,6 +100,9 @@ def test_sample_areas_kernel_equals_its_numpy_specification(n, k):
     nb = rng.integers(-1, n, size=(n, k)).astype(np.int32)
     got = sample_areas(p, nb)
     assert np.array_equal(got, sample_area(p, nb))
+    # measured on points * scale: a power of two scales the squares exactly
+    assert np.array_equal(sample_areas(p, nb, 0.3), sample_area(p, nb, 0.3))
+    assert np.array_equal(sample_areas(p, nb, 2.0 ** -20), got * 2.0 ** -40)
     # exact values: the farthest graph neighbor's squared distance, 0 without neighbors
     i = int(np.flatnonzero((nb >= 0).any(axis=1))[0])
     j = nb[i][nb[i] >= 0]

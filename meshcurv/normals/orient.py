@@ -97,7 +97,8 @@ def piece_signs(count, normal_sum, centroid_score):
 
     Parameters
     ----------
-    count : (c,) float, the area of each piece (the sum of :func:`sample_areas`; or its points)
+    count : (c,) float, the area of each piece (the sum of :func:`sample_areas`, in any unit;
+        or its points)
     normal_sum : (c, 3) float, the same-weighted sum of its unit normals
     centroid_score : (c,) float, the same-weighted sum over its points of
         ``(p - centroid) . n``, the centroid weighted alike
@@ -114,7 +115,9 @@ def piece_signs(count, normal_sum, centroid_score):
     """
     count = np.asarray(count, dtype=np.float64)
     normal_sum = np.asarray(normal_sum, dtype=np.float64).reshape(-1, 3)
-    mean_length = np.linalg.norm(normal_sum, axis=1) / np.maximum(count, 1.0)
+    length = np.linalg.norm(normal_sum, axis=1)
+    # a ratio of sums in the same units (areas or points): the same in metres and millimetres
+    mean_length = np.divide(length, count, out=np.zeros_like(length), where=count > 0)
     open_piece = mean_length >= CLOSED_MEAN_NORMAL
     facing_up = np.abs(normal_sum[:, 2]) >= SIDEWAYS_MEAN_NORMAL_Z * np.linalg.norm(normal_sum,
                                                                                   axis=1)
@@ -123,9 +126,11 @@ def piece_signs(count, normal_sum, centroid_score):
     return np.where(score < 0, -1.0, 1.0), rule
 
 
-def sample_areas(points, neighbors):
+def sample_areas(points, neighbors, scale=1.0):
     """Share of the surface each point stands for, up to a common factor: the squared distance
-    to the farthest of its graph neighbors ((n,) float64; 0 for a point without neighbors).
+    to the farthest of its graph neighbors, measured on ``points * scale`` ((n,) float64; 0 for
+    a point without neighbors). A ``scale`` near 1 / the extent keeps the squares of clouds
+    at 1e300 or 1e-300 finite and nonzero.
 
     Weighting the sums of :func:`piece_signs` by it makes their decision independent of the
     sampling density: a closed cloud sampled ten times more densely on one side still has
@@ -138,11 +143,11 @@ def sample_areas(points, neighbors):
     if nb.ndim != 2 or len(nb) != len(points):
         raise ValueError(f"neighbors must be ({len(points)}, k), not {nb.shape}")
     return _farthest_neighbor_d2(np.ascontiguousarray(points, dtype=np.float64),
-                                 np.ascontiguousarray(nb))
+                                 np.ascontiguousarray(nb), float(scale))
 
 
 @njit(parallel=True, cache=True)
-def _farthest_neighbor_d2(points, neighbors):
+def _farthest_neighbor_d2(points, neighbors, scale):
     """:func:`sample_areas`' kernel: one pass over the graph rows, without the (n, k, 3)
     offsets of the numpy specification (ten times faster)."""
     n, k = neighbors.shape
@@ -155,9 +160,9 @@ def _farthest_neighbor_d2(points, neighbors):
                 j = neighbors[i, a]
                 if j < 0:
                     continue
-                d0 = points[j, 0] - points[i, 0]
-                d1 = points[j, 1] - points[i, 1]
-                d2 = points[j, 2] - points[i, 2]
+                d0 = (points[j, 0] - points[i, 0]) * scale
+                d1 = (points[j, 1] - points[i, 1]) * scale
+                d2 = (points[j, 2] - points[i, 2]) * scale
                 # in the order numpy's einsum sums three products (x0 x0 + x2 x2) + x1 x1,
                 # as the areas were first computed: the same bits
                 dd = (d0 * d0 + d2 * d2) + d1 * d1
@@ -285,16 +290,21 @@ def orient_mst(points, normals, k=10, neighbors=None, note=False):
     # one global decision per connected piece, each point standing for its share of the area
     n_comp = len(ok)                       # labels are root rows: bins 0..len(ok) - 1
     count = np.bincount(labels, minlength=n_comp)
-    area = sample_areas(p, nb)
+    # in a unit of a power of two above every |coordinate|: the same bits as in model units
+    # wherever those neither overflow nor underflow (clouds at 1e300, 1e-300, or both)
+    unit = math.ldexp(1.0, min(1000, -math.frexp(float(np.abs(p).max()))[1]))
+    area = sample_areas(p, nb, unit)
     weight = np.bincount(labels, weights=area, minlength=n_comp)
     size = np.where(weight > 0, weight, 1.0)
-    centroid = np.column_stack([np.bincount(labels, weights=area * p[:, c], minlength=n_comp)
+    centroid = np.column_stack([np.bincount(labels, weights=area * (p[:, c] * unit),
+                                            minlength=n_comp)
                                 for c in range(3)]) / size[:, None]
     along = np.empty(len(p))
     for s in range(0, len(p), _ROWS):
         # in pieces: no (n, 3) offsets from the centroids
         e = s + _ROWS
-        along[s:e] = area[s:e] * np.einsum("ij,ij->i", p[s:e] - centroid[labels[s:e]], nv[s:e])
+        along[s:e] = area[s:e] * np.einsum("ij,ij->i", p[s:e] * unit - centroid[labels[s:e]],
+                                           nv[s:e])
     score = np.bincount(labels, weights=along, minlength=n_comp)
     del along
     normal_sum = np.column_stack([np.bincount(labels, weights=area * nv[:, c],

@@ -176,6 +176,25 @@ def test_invariance_translation_scale_rotation(with_faces):
             np.testing.assert_allclose(res.normals[ok], base.normals[ok] @ rot.T, atol=1e-6)
 
 
+def test_renumbering_changes_estimates_within_their_own_error():
+    """The sampling planes turn with the neighbour of lowest vertex index (exactly equivariant
+    under the motions above), so renumbering the vertices turns them and moves each estimate
+    within the estimator's own discretisation error, not beyond it: torus 96 x 32, mean |dk1|
+    0.0133 in grid order, 0.0118 renumbered, median change 0.005. The normals change by
+    rounding only."""
+    s = surfaces.torus(2.0, 0.5, n_major=96, n_minor=32)
+    perm = np.random.default_rng(3).permutation(len(s.vertices))
+    back = np.argsort(perm)
+    base = meshcurv.principal_curvatures(s.vertices, s.faces)
+    moved = meshcurv.principal_curvatures(s.vertices[perm], back[s.faces])
+    assert base.valid.all() and moved.valid.all()
+    k1 = moved.k1[back]
+    err, err_moved = np.mean(np.abs(base.k1 - s.k1)), np.mean(np.abs(k1 - s.k1))
+    assert 0.75 < err_moved / err < 1.33
+    assert np.median(np.abs(k1 - base.k1)) < err
+    np.testing.assert_allclose(moved.normals[back], base.normals, atol=1e-12)   # sums reordered
+
+
 # ---------------------------------------------------------------- thin sheet
 
 def test_thin_sheet_kring_does_not_leak():

@@ -55,6 +55,8 @@ def _cases():
         "torus_kring_estimated_normals": lambda: pc(torus.vertices, torus.faces, radius=0.3),
         "torus_ball_default_radius": lambda: pc(torus.vertices, torus.faces,
                                                 neighborhood="ball"),
+        "noisy_torus_kring_wide_field": lambda: pc(_noisy(torus.vertices, 0.005, seed=4),
+                                                   torus.faces, radius=0.3),
         "sphere_cloud_mst": lambda: pc(sphere.vertices, radius=0.25),
         "noisy_sphere_cloud_viewpoint": lambda: pc(cloud, radius=0.3, orientation=(0, 0, 5)),
         "paraboloid_options": lambda: pc(para.vertices, para.faces, para.normals, radius=1.0,

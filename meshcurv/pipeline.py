@@ -1149,7 +1149,7 @@ def _prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progre
                                                               finite, plan, progress,
                                                               turned=turned)
     if mixes and f is not None:
-        mixes = _normal_rows_weigh(v, s, query, r, plan, start)
+        mixes = _normal_rows_weigh(v, s, r, plan, start)
     if plan.robust_points:
         # scores by vertex; weights by row of s.points (the grid's order where it has one);
         # the same lists give the spanning tree's or the unweighted plane-fit normals
@@ -1202,13 +1202,14 @@ def _prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progre
                   _normal_field(field, s, plan), face_weight)
 
 
-def _normal_rows_weigh(v, search, query, radius, plan, start):
+def _normal_rows_weigh(v, search, radius, plan, start):
     """Whether the normal rows of a mesh's circle fits weigh something (see
     :data:`WIDE_FIELD_GAIN`): the gain ``1 - beta`` the blocks give them, from the noise of
-    :func:`meshcurv.fit.jet.local_jet` at a sample of the ``query`` vertices with their block
-    normals (``start``: :func:`_start_normals`' tuple)."""
+    :func:`meshcurv.fit.jet.local_jet` at a sample of the vertices (all of them, whatever
+    the query: a row's estimate does not depend on which others are asked for) with their
+    block normals (``start``: :func:`_start_normals`' tuple)."""
     nv, face_normals, _, face_weight = start
-    sample = query[_sample_queries(len(query), WIDE_FIELD_SAMPLE)]
+    sample = _sample_queries(len(v), WIDE_FIELD_SAMPLE)
     if not len(sample):
         return False
     indptr, indices = search.neighbors(sample)

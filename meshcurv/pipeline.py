@@ -40,9 +40,10 @@ __all__ = ["run", "run_radii", "estimate_normals", "weight_blend", "clean_fracti
 # Query points per call into the kernels: bounds the memory of the neighbor lists (about
 # 0.8 kB per query point at 100 neighbors) at no measurable cost in speed.
 BLOCK = 16384
-# Neighbor list entries per block (int64): blocks shrink where the balls hold more than
-# 1024 points (a radius much larger than the sampling), so their lists stay within ~128 MB.
-BLOCK_ENTRIES = 2 ** 24
+# Neighbor list entries per block (int64, and 1.5x as many int32 in the searches' scratch):
+# blocks shrink where the balls hold more than 128 points (the wide normal field's balls of
+# twice the radius hold ~400), so their lists stay within ~16 MB and the scratch ~12 MB.
+BLOCK_ENTRIES = 2 ** 21
 # Most neighbor pairs (query points x neighbors) a call takes on: hours of work beyond.
 MAX_PAIRS = 1e11
 

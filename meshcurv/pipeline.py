@@ -1378,9 +1378,7 @@ def retry_sparse(out, v, f, nv, face_normals, radius, query, plan, search, face_
 
     def search_at(factor):
         if factor not in wide:
-            r = radius * factor
-            wide[factor] = (kring_search(v, f, r, search.adjacency) if plan.use_kring else
-                            ball_search(v, finite, r))
+            wide[factor] = _search_like(search, v, f, finite, radius * factor)
         return wide[factor]
     passes = [(factor, plan) for factor in SPARSE_FACTORS]
     if plan.fit[2] > SPARSE_MIN_POINTS:

@@ -223,9 +223,9 @@ class Options:
         spheres): mean |dk| 4.7-5.7x lower; clean meshes unchanged (torus 240 x 60 0.0085 ->
         0.0069). Cost: +0-10 % on clouds, +25 % on meshes (the plane-fit normals of every
         vertex before the blocks); on noisy meshes the wider field of those normals
-        (``Plan.wide_field``) halves the error again at 1.56x the time (torus 240 x 60, 0.3 %
-        noise: 0.036 -> 0.015; 300k vertices, 0.1 % noise: 8.4 -> 13.0 s). A tiled run's halo
-        then covers two radii. "off": positions only.
+        (``Plan.wide_field``) cuts the error by up to 3x more (torus 240 x 60, 0.3 % noise:
+        0.036 -> 0.015; ellipsoid 0.056 -> 0.054) at 1.6-1.7x the time (300k vertices, 0.1 %
+        noise). A tiled run's halo then covers two radii. "off": positions only.
     robust_points : bool, default True
         Down-weight stray points (scanner spikes) in every fit: each point gets an outlier
         score, its distance from a robust (Tukey-reweighted) height fit of its neighborhood

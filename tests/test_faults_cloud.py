@@ -184,6 +184,12 @@ def test_coincident_points_say_so_or_give_invalid_rows():
     # a cloud whose points are mostly duplicated still has a default radius
     dup = np.repeat(SPHERE.vertices, 20, axis=0)
     assert abs(default_radius(dup) / RADIUS - 1) < 0.01
+    # a cloud merged with a copy of itself (or of a part) keeps its radius: the ~100 points
+    # are distinct positions (it was 1 / sqrt 2 smaller); 2 %: the density is measured on
+    # another random sample of the points
+    for copy in (SPHERE.vertices, SPHERE.vertices[::3]):
+        merged = np.vstack([SPHERE.vertices, copy])
+        assert abs(default_radius(merged) / RADIUS - 1) < 0.02
 
 
 def test_a_radius_far_too_large_is_computed_and_explained():

@@ -73,7 +73,7 @@ def default_radius(points, target_neighbors=100, sample=20000, seed=0, faces=Non
     radius holds fewer than half the target (samplings far denser in one direction than the
     other, see :func:`_grown_to_target`). For a regular grid of spacing h this
     is about 5.6 h; for a mesh about 5 mean edge lengths. A few far-away points do not move it
-    (a median); duplicated points count once where most points are duplicates; clouds of any
+    (a median); a position held by several points counts once; clouds of any
     scale (1e-300 ... 1e300) are measured on coordinates scaled by a power of two. Small inputs
     get balls of at most ``MAX_BALL_FRACTION`` of their points (fewer than 400 points: the
     target is a quarter of them, and the density comes from that many neighbors), and a mesh's
@@ -246,6 +246,15 @@ def _default_radius(p, target_neighbors, sample, seed, patch=True):
         dk2 = np.median(d[:, k] ** 2)
     if not (np.isfinite(dk2) and dk2 > 0):
         return float("nan")
+    # the target counts distinct positions (the fits skip a point's copies): a cloud merged
+    # with a copy of itself keeps its radius, measured at as many distinct neighbors
+    share = _points_per_position(d)
+    if share > 1.0:
+        target_neighbors *= share
+        k = min(len(p) - 1, int(round(k * share)))
+        d, _ = tree.query(probe, k=k + 1, workers=-1)
+        with np.errstate(over="ignore"):
+            dk2 = np.median(d[:, k] ** 2)
     radius = float(np.sqrt(target_neighbors / k * dk2))
     # the area density extrapolated from k neighbors to the target, checked where it was
     if target_neighbors > k:
@@ -254,6 +263,19 @@ def _default_radius(p, target_neighbors, sample, seed, patch=True):
         radius = _local_patch(radius, 0.5 * radius,
                               _ball_flatness(tree, p, 4 * int(math.ceil(target_neighbors))))
     return radius
+
+
+def _points_per_position(distances):
+    """Points per distinct position, from the distances (m, j) of m sample points (a uniform
+    sample of the points) to their j nearest points, themselves first: the inverse of the mean
+    of 1 / (copies of each sample point among them). 1.0 exactly without duplicates; copies
+    beyond the j nearest are not counted.
+
+    >>> _points_per_position(np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 2.0], [0.0, 1.0, 1.0]]))
+    1.5
+    """
+    copies = np.count_nonzero(np.asarray(distances) == 0.0, axis=1)
+    return float(1.0 / np.mean(1.0 / np.maximum(copies, 1)))
 
 
 def _grown_to_target(tree, probe, radius, target_neighbors):

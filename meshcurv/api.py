@@ -4,9 +4,14 @@ power-of-two rescaling of extreme scales) and options; the work itself is
 :func:`meshcurv.pipeline.run` (and :mod:`meshcurv.scale` for "auto").
 """
 
-import numpy as np
+from dataclasses import replace
 
-from . import pipeline, scale as scale_select, weld
+import numpy as np
+from scipy.spatial import cKDTree
+
+from . import coarse as coarse_mls, pipeline, scale as scale_select, weld
+from .fit.mls import STEP
+from .fit.outliers import outlier_weight
 from .inputs import as_arrays
 from .neighbors import MAX_BALL_FRACTION, default_radius, power_of_two_scale
 from .options import Options, resolve_plan
@@ -127,12 +132,15 @@ def no_estimate_reason(result, n_points, option="radius"):
             f"or coincident); try another {option}")
 
 
-def _resolve_radius(radius, v, f):
-    """The radius in model units: given, or the default from the sampling (None)."""
+def _resolve_radius(radius, v, f, details=False):
+    """The radius in model units: given, or the default from the sampling (None); with
+    ``details``, ``(radius, coarse)``: whether the default was made smaller for a mesh coarse
+    for its shape (:func:`meshcurv.neighbors.default_radius`)."""
     finite_rows = np.isfinite(v).all(axis=1)
     n_finite = int(finite_rows.sum())
+    coarse = False
     if radius is None:
-        radius = float(default_radius(v, faces=f))
+        radius, coarse = default_radius(v, faces=f, details=True)
         if n_finite > 1 and not (np.isfinite(radius) and radius > 0):
             raise ValueError(_no_default_radius(v[finite_rows]))
     elif isinstance(radius, str):
@@ -141,7 +149,7 @@ def _resolve_radius(radius, v, f):
     radius = float(radius)
     if n_finite > 1:
         _check_radius(radius)
-    return radius
+    return (radius, bool(coarse)) if details else radius
 
 
 def _auto_ladder(v, f, r0):
@@ -281,8 +289,51 @@ def _estimate(v, f, given_normals, radius, query, plan, progress):
         return scale_select.run_auto(v, f, given_normals, r0, query,
                                      plan._replace(wide_field=False), progress, radii=radii,
                                      run_radii=_run_radii)
-    radius = _resolve_radius(radius, v, f)
+    radius, coarse = _resolve_radius(radius, v, f, details=True)
+    if coarse and plan.coarse_mls and power_of_two_scale(radius) == 1.0:
+        return _coarse_estimate(v, f, given_normals, radius, query, plan, progress)
     return _run_one(v, f, given_normals, radius, query, plan, progress)
+
+
+def _coarse_estimate(v, f, given_normals, radius, query, plan, progress):
+    """The estimate of a mesh coarse for its shape at its default ``radius``: the circle fits'
+    (:func:`meshcurv.pipeline.run`), blended with the MLS curvature of the same vertices and
+    normals (:mod:`meshcurv.coarse`). With ``query``, the circle fits also run at the vertices
+    the queries' supports reach, whose normals the MLS fits use: the rows are those of the
+    whole mesh's estimate."""
+    h = coarse_mls.support(v, f, radius)
+    reach = float(h.max()) * (1.0 + 2.0 * STEP)
+    if plan.use_kring:
+        search = pipeline.kring_search(v, f, reach).neighbors
+    else:
+        search = _ball_lists(v, reach)
+    rows = np.arange(len(v)) if query is None else query
+    reached = None if query is None else np.union1d(query, search(query)[1])
+    res = _run_one(v, f, given_normals, radius, reached, plan, progress)
+    normals = res.normals
+    weights = outlier_weight(res.outlier_score)
+    if reached is not None:
+        normals = np.full(v.shape, np.nan)
+        normals[reached] = res.normals
+        weights = np.ones(len(v))
+        weights[reached] = outlier_weight(res.outlier_score)
+        res = weld.expand_rows(res, np.searchsorted(reached, query))
+    return replace(res, **coarse_mls.mls_rows(res, rows, v, normals, weights, h[rows], search))
+
+
+def _ball_lists(v, radius):
+    """``lists(idx) -> (indptr, indices)``: the rows of ``v`` within ``radius`` of ``v[idx]``
+    (k-d tree; NaN rows never listed)."""
+    finite = np.flatnonzero(np.isfinite(v).all(axis=1))
+    tree = cKDTree(v[finite])
+
+    def lists(idx):
+        found = tree.query_ball_point(v[idx], radius)
+        indptr = np.zeros(len(idx) + 1, dtype=np.int64)
+        indptr[1:] = np.cumsum([len(a) for a in found])
+        flat = np.concatenate(found).astype(np.int64) if len(idx) else np.zeros(0, np.int64)
+        return indptr, finite[flat]
+    return lists
 
 
 def _run_radii(v, f, given_normals, radii, query, plan, progress):

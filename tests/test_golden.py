@@ -29,6 +29,7 @@ import sys
 
 import numpy as np
 import pytest
+import trimesh
 
 import meshcurv
 from meshcurv import surfaces
@@ -48,6 +49,7 @@ def _cases():
     sphere = surfaces.sphere(sampling="random", n=3000, seed=1)
     para = surfaces.paraboloid(sampling="random", n=4000, extent=4.0, seed=2)
     cloud = _noisy(sphere.vertices, 0.003, seed=3)
+    coarse = trimesh.creation.torus(1.0, 0.3, major_sections=64, minor_sections=16)
     pc = meshcurv.principal_curvatures
     return {
         "torus_kring_given_normals": lambda: pc(torus.vertices, torus.faces, torus.normals,
@@ -64,6 +66,8 @@ def _cases():
                                          section_blend=False),
         "paraboloid_cloud_query": lambda: pc(para.vertices, radius=1.0, weighting="distance",
                                              query=np.arange(0, len(para.vertices), 7)),
+        # coarse for its shape at the default radius: circle fits blended with MLS curvature
+        "coarse_torus_mls": lambda: pc(coarse.vertices, coarse.faces),
     }
 
 

@@ -64,7 +64,8 @@ def typical_extent(points, sample=20000, seed=0):
         return float(np.median(np.abs(p - np.median(p, axis=0)).max(axis=1)))
 
 
-def default_radius(points, target_neighbors=100, sample=20000, seed=0, faces=None):
+def default_radius(points, target_neighbors=100, sample=20000, seed=0, faces=None,
+                   details=False):
     """Radius (model units) whose ball holds about ``target_neighbors`` points of the sampling.
 
     The local area density is estimated from the distance d16 to the 16th nearest neighbor,
@@ -86,21 +87,27 @@ def default_radius(points, target_neighbors=100, sample=20000, seed=0, faces=Non
     ----------
     points : (n, 3) float, NaN rows ignored
     faces : (m, 3) int, optional, the mesh's triangles (valid indices into ``points``)
+    details : bool, also say whether the mesh is coarse for its shape
 
     Returns
     -------
-    float (NaN if there are fewer than 2 distinct finite points)
+    float (NaN if there are fewer than 2 distinct finite points); with ``details``,
+    ``(radius, coarse)``: ``coarse`` is True where a mesh's radius was made smaller because
+    its balls reached beyond a local patch (:func:`_local_patch`), i.e. where a ball holding
+    ~100 vertices spans much of the shape
     """
     p = np.asarray(points, dtype=np.float64)
     p = p[np.isfinite(p).all(axis=1)]
     if len(p) < 2:
-        return float("nan")
+        return (float("nan"), False) if details else float("nan")
     s = power_of_two_scale(typical_extent(p, sample, seed))
     if s != 1.0:
         with np.errstate(over="ignore"):
             scaled = np.asarray(points, dtype=np.float64) * s     # every row: faces index them
-        return default_radius(scaled, target_neighbors, sample, seed, faces) / s
+        radius, coarse = default_radius(scaled, target_neighbors, sample, seed, faces, True)
+        return (radius / s, coarse) if details else radius / s
     mesh = faces is not None and len(faces) > 0
+    coarse = False
     radius = _default_radius(p, target_neighbors, sample, seed, patch=not mesh)
     if not np.isfinite(radius):
         # most points duplicated (coincident points are nobody's neighbor): distinct ones
@@ -111,8 +118,10 @@ def default_radius(points, target_neighbors=100, sample=20000, seed=0, faces=Non
         v = np.asarray(points, dtype=np.float64)
         f = np.asarray(faces, dtype=np.int64)
         floor = RING_MARGIN * _ring_reach(v, f)
-        radius = _local_patch(max(radius, floor), floor, _kring_flatness(v, f))
-    return radius
+        start = max(radius, floor)
+        radius = _local_patch(start, floor, _kring_flatness(v, f))
+        coarse = radius < start
+    return (radius, coarse) if details else radius
 
 
 def _local_patch(radius, floor, flatness):

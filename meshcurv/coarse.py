@@ -1,0 +1,100 @@
+"""Meshes coarse for their shape: the curvature of the MLS surface of oriented spheres
+(:mod:`meshcurv.fit.mls`) where the circle fits have too few vertices per normal section.
+
+A mesh is coarse for its shape where a ball holding ~100 vertices would reach around it, so
+that the default radius had to be made smaller to stay on a local patch
+(:func:`meshcurv.neighbors.default_radius` with ``details``: a low-poly torus of 16 vertices
+around the tube). Each of the 2 x 8 half-sets of a circle fit then holds a few vertices at
+the discrete positions of the mesh's grid, and the circle fits' error is that of the sampling,
+not of the noise: trimesh's tori 1 / 0.3 (64 x 16), 3 / 1 (40 x 20), 2 / 0.5 and 1 / 0.2
+(32 x 32) have mean |dk| 0.041, 0.022, 0.028 and 0.069 with the circle fits, at any radius
+and with exact normals alike. The MLS surface through the same vertices and the circle fits'
+normals (support :func:`support`) gives 0.0068, 0.0027, 0.0057 and 0.019 there on its own.
+
+It is more sensitive to position noise, so the two are blended row by row by the noise the
+local jet measured: ``g = 1 / (1 + (noise / (NOISE_SCALE radius))^4)`` of the MLS estimate.
+Shape alone gives noise / radius 0.002-0.006 on those clean tori; Gaussian noise along the
+normal of 0.1 % of the diagonal 0.012-0.017, of 0.3 % 0.034-0.044. Mean |dk|, circle fits
+alone -> blended, the four tori in the order above (measured once with a script):
+
+==========  ===================================  ===================================
+noise       circle fits alone                    blended (NOISE_SCALE 0.015)
+==========  ===================================  ===================================
+0           0.041, 0.022, 0.028, 0.069           0.0074, 0.0027, 0.0055, 0.016
+0.05 %      0.086, 0.019, 0.029, 0.073           0.031, 0.014, 0.016, 0.037
+0.1 %       0.077, 0.019, 0.031, 0.079           0.044, 0.017, 0.025, 0.057
+0.3 %       0.063, 0.026, 0.046, 0.105           0.066, 0.027, 0.046, 0.104
+0.5 %       0.085, 0.034, 0.067, 0.142           0.086, 0.034, 0.066, 0.142
+==========  ===================================  ===================================
+
+With NOISE_SCALE 0.02 the clean and 0.05 % rows gain a little more (0.0068 on the first
+torus) and the 0.3 % row loses more (0.072 on the first torus, 14 % worse than the circle
+fits alone); 0.015 keeps every loss within 5 %.
+
+Used where the radius is the default and the input has faces (``Options.coarse_meshes``);
+clouds keep the circle fits (their rings are not known).
+"""
+
+import numpy as np
+
+from .fit.mls import mls_curvature
+from .neighbors.radius import _longest_edges
+
+__all__ = ["support", "mls_rows", "SUPPORT_EDGES", "SUPPORT_CAP", "NOISE_SCALE"]
+
+# The MLS support h of a vertex reaches this many times its longest edge: its whole 1-ring
+# then weighs at least (1 - 1/4)^4 = 0.32 in the weights (1 - d^2 / h^2)^4, which fall to 0.01
+# at 0.84 h; with h = radius a grid twice as fine one way as the other (the 32 x 32 torus
+# 2 / 0.5: 0.10 around the tube, 0.49 along it) left the far neighbours out and the fit
+# degenerate in that direction (mean |dk| 0.30).
+SUPPORT_EDGES = 2.0
+
+# ... and at most this many radii (the normal field's reach, see pipeline.FIELD_RATIO): a few
+# long slivers do not widen every list.
+SUPPORT_CAP = 2.0
+
+# Noise (the local jet's RMS residual at the radius) over the radius at which the MLS estimate
+# and the circle fits share a row equally (see the module's docstring).
+NOISE_SCALE = 0.015
+
+
+def support(v, f, radius):
+    """The MLS support h (n,) of each vertex, model units: ``SUPPORT_EDGES`` times its longest
+    edge, at least ``radius`` and at most ``SUPPORT_CAP * radius`` (``radius`` for vertices
+    without a finite edge)."""
+    longest, used = _longest_edges(np.asarray(v, dtype=np.float64), np.asarray(f, np.int64))
+    h = np.clip(SUPPORT_EDGES * longest, radius, SUPPORT_CAP * radius)
+    return np.where(used, h, radius)
+
+
+def mls_rows(result, rows, v, normals, point_weights, h, search, block=16384):
+    """The MLS estimate of the rows ``rows`` of ``result`` (vertex indices, (m,)), blended
+    into a copy of its fields (k1, k2, d1, d2, normals) by the row's noise (module docstring).
+
+    ``normals`` (n, 3): unit normals of every vertex the supports reach (NaN: left out);
+    ``point_weights`` (n,) or None: the outlier weights; ``h`` (m,): each row's support;
+    ``search(idx)``: CSR lists ``(indptr, indices)`` about the vertices ``idx`` holding every
+    vertex within ``h (1 + 2 STEP)``. Rows ``result`` has no estimate for, and rows whose MLS
+    fit fails, keep the circle fits'.
+    """
+    m = len(rows)
+    k1, k2 = np.empty(m), np.empty(m)
+    d1, d2, n = np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 3))
+    for lo in range(0, m, block):
+        sl = slice(lo, min(m, lo + block))
+        idx = rows[sl]
+        indptr, indices = search(idx)
+        mls_curvature(v, normals, v[idx], result.normals[sl], idx, indptr, indices, h[sl],
+                      point_weights, (k1[sl], k2[sl], d1[sl], d2[sl], n[sl]))
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        g = 1.0 / (1.0 + (np.asarray(result.noise) / (NOISE_SCALE * result.radius)) ** 4)
+    use = np.asarray(result.valid) & np.isfinite(k1) & np.isfinite(g)
+    g = np.where(use, g, 0.0)
+    out = {"k1": g * np.where(use, k1, 0.0) + (1.0 - g) * result.k1,
+           "k2": g * np.where(use, k2, 0.0) + (1.0 - g) * result.k2}
+    # directions and normal: the larger share's
+    mls_side = (g >= 0.5)[:, None]
+    out["d1"] = np.where(mls_side, d1, result.d1)
+    out["d2"] = np.where(mls_side, d2, result.d2)
+    out["normals"] = np.where(mls_side, n, result.normals)
+    return out

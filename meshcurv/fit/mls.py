@@ -1,0 +1,195 @@
+"""MLS curvature: the principal curvatures of the moving-least-squares surface of oriented
+algebraic spheres (APSS, Guennebaud & Gross 2007) through points with normals, as one compiled
+kernel over query points with CSR neighbor lists (:func:`mls_curvature`).
+
+About each evaluation point y a sphere (or plane) ``u0 + u . z + u4 |z|^2`` is fitted to the
+neighbors' positions and unit normals with the weights ``(1 - |p - y|^2 / h^2)^4`` (h the
+support), in closed form; its value at y is the potential F(y), whose zero set is the surface.
+Its gradient and Hessian, by central differences over 19 evaluations at steps of
+``STEP * h`` about a point, give the normal and the shape operator
+``P Hess(F) P / |grad F|`` (P the tangent projector). Because the fit follows the evaluation
+point, F is a smooth surface of second order even where a single sphere could not describe
+the shape (a torus's saddle) and where a neighborhood holds few points per direction (a
+low-poly torus: 16 vertices around the tube), where the circle fits in normal sections of
+:mod:`meshcurv.fit.fused` are far less accurate. It needs normals and is more sensitive to
+position noise than the circle fits; :mod:`meshcurv.coarse` says where it is used.
+
+Numpy specification: :func:`meshcurv.fit.mls_spec.mls_curvature_at`.
+"""
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from ..linalg import CHUNK
+
+__all__ = ["mls_curvature", "STEP"]
+
+# Central-difference step, a fraction of the support h: F is smooth on the scale h, so the
+# truncation error is ~STEP^2 relative (1e-6), and its values near the surface are ~|grad F|
+# times the step, so the rounding error of the second differences is ~1e-16 / STEP^2 = 1e-10
+# relative.
+STEP = 1e-3
+
+
+@njit(cache=True)
+def _potential(points, normals, point_weights, nbr, lo, hi, own, x0, x1, x2, h2):
+    """F at (x0, x1, x2): the oriented sphere fitted to the points ``own`` (a row of
+    ``points``, or -1 for none) and ``nbr[lo:hi]`` (entries equal to ``own`` skipped), NaN
+    where the weights vanish or the fit is singular."""
+    sw = sp0 = sp1 = sp2 = sn0 = sn1 = sn2 = sa = sb = 0.0
+    for e in range(lo - 1, hi):
+        if e < lo:
+            j = own
+            if j < 0:
+                continue
+        else:
+            j = nbr[e]
+            if j == own:
+                continue
+        q0 = points[j, 0] - x0
+        q1 = points[j, 1] - x1
+        q2 = points[j, 2] - x2
+        qq = q0 * q0 + q1 * q1 + q2 * q2
+        r = 1.0 - qq / h2
+        if not r > 0.0:
+            continue
+        n0 = normals[j, 0]
+        n1 = normals[j, 1]
+        n2 = normals[j, 2]
+        if not np.isfinite(n0 + n1 + n2):
+            continue
+        w = r * r
+        w = w * w
+        if point_weights is not None:
+            w *= point_weights[j]
+            if not w > 0.0:
+                continue
+        sw += w
+        sp0 += w * q0
+        sp1 += w * q1
+        sp2 += w * q2
+        sn0 += w * n0
+        sn1 += w * n1
+        sn2 += w * n2
+        sa += w * (q0 * n0 + q1 * n1 + q2 * n2)
+        sb += w * qq
+    pp = sp0 * sp0 + sp1 * sp1 + sp2 * sp2
+    den = sb * sw - pp
+    if not (sw > 0.0 and den > 0.0):
+        return np.nan
+    u4 = 0.5 * (sa * sw - (sp0 * sn0 + sp1 * sn1 + sp2 * sn2)) / den
+    u0 = (sn0 - 2.0 * u4 * sp0) / sw
+    u1 = (sn1 - 2.0 * u4 * sp1) / sw
+    u2 = (sn2 - 2.0 * u4 * sp2) / sw
+    return -(u0 * sp0 + u1 * sp1 + u2 * sp2 + u4 * sb) / sw
+
+
+@njit(cache=True)
+def _curvature_one(points, normals, point_weights, nbr, lo, hi, own, x, nq, h, hess, out):
+    """``out[:]`` = (k1, k2, d1 (3), d2 (3), n (3)) at x (see :func:`mls_curvature`);
+    False (``out`` untouched) where F or its derivatives are undefined."""
+    h2 = h * h
+    s = STEP * h
+    f0 = _potential(points, normals, point_weights, nbr, lo, hi, own, x[0], x[1], x[2], h2)
+    g = np.empty(3)
+    for i in range(3):
+        y = x.copy()
+        y[i] += s
+        fp = _potential(points, normals, point_weights, nbr, lo, hi, own, y[0], y[1], y[2], h2)
+        y[i] = x[i] - s
+        fm = _potential(points, normals, point_weights, nbr, lo, hi, own, y[0], y[1], y[2], h2)
+        g[i] = (fp - fm) / (2.0 * s)
+        hess[i, i] = (fp - 2.0 * f0 + fm) / (s * s)
+    for i in range(3):
+        for j in range(i + 1, 3):
+            acc = 0.0
+            for si, sj, sign in ((1.0, 1.0, 1.0), (-1.0, -1.0, 1.0), (1.0, -1.0, -1.0),
+                                 (-1.0, 1.0, -1.0)):
+                y = x.copy()
+                y[i] += si * s
+                y[j] += sj * s
+                acc += sign * _potential(points, normals, point_weights, nbr, lo, hi, own,
+                                         y[0], y[1], y[2], h2)
+            hess[i, j] = acc / (4.0 * s * s)
+            hess[j, i] = hess[i, j]
+    length = math.sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
+    if not (np.isfinite(length) and length > 0.0 and np.isfinite(hess.sum())):
+        return False
+    sign = 1.0 if g[0] * nq[0] + g[1] * nq[1] + g[2] * nq[2] >= 0.0 else -1.0
+    n = g * (sign / length)
+    t1 = np.zeros(3)
+    t1[0 if abs(n[0]) < 0.9 else 1] = 1.0
+    t1 -= (t1[0] * n[0] + t1[1] * n[1] + t1[2] * n[2]) * n
+    t1 /= math.sqrt(t1[0] * t1[0] + t1[1] * t1[1] + t1[2] * t1[2])
+    t2 = np.array([n[1] * t1[2] - n[2] * t1[1], n[2] * t1[0] - n[0] * t1[2],
+                   n[0] * t1[1] - n[1] * t1[0]])
+    scale = sign / length
+    s11 = s12 = s22 = 0.0
+    for a in range(3):
+        for b in range(3):
+            s11 += t1[a] * hess[a, b] * t1[b]
+            s12 += t1[a] * hess[a, b] * t2[b]
+            s22 += t2[a] * hess[a, b] * t2[b]
+    s11 *= scale
+    s12 *= scale
+    s22 *= scale
+    half_trace = 0.5 * (s11 + s22)
+    disc = math.hypot(0.5 * (s11 - s22), s12)
+    theta = 0.5 * math.atan2(2.0 * s12, s11 - s22)
+    d1 = math.cos(theta) * t1 + math.sin(theta) * t2
+    out[0] = half_trace + disc
+    out[1] = half_trace - disc
+    out[2:5] = d1
+    out[5] = n[1] * d1[2] - n[2] * d1[1]
+    out[6] = n[2] * d1[0] - n[0] * d1[2]
+    out[7] = n[0] * d1[1] - n[1] * d1[0]
+    out[8:11] = n
+    return True
+
+
+@njit(parallel=True, cache=True)
+def mls_curvature(points, normals, query_points, query_normals, query_rows, indptr, indices,
+                  support, point_weights, out):
+    """MLS curvature at each query point.
+
+    Parameters
+    ----------
+    points, normals : (n, 3) float64, the neighbor set and its unit normals (NaN rows are
+        left out)
+    query_points, query_normals : (m, 3) float64, where to estimate, and a normal there that
+        sets the side of the result's normal (convex positive about it)
+    query_rows : (m,) int64, the row of each query point in ``points`` (-1: none): it takes
+        part in its own fit once, whether or not its list holds it
+    indptr, indices : CSR lists into ``points``: the candidates of query q; they must hold
+        every point within ``support[q] * (1 + 2 STEP)`` of it (the stencil's reach)
+    support : (m,) float64, the weights' support h per query point, model units
+    point_weights : (n,) float64 in [0, 1] or None, multiplies each point's weight
+    out : ``(k1, k2, d1, d2, n)``, (m,) and (m, 3) float64, written in place: curvatures
+        (1 / model units, k1 >= k2, convex positive about the normal), unit principal
+        directions and the unit normal of the MLS surface (d1, d2, n right-handed); NaN
+        where the fit is undefined at a stencil point (too few points within h)
+    """
+    k1, k2, d1, d2, nout = out
+    m = query_points.shape[0]
+    nchunks = (m + CHUNK - 1) // CHUNK
+    for c in prange(nchunks):
+        hess = np.empty((3, 3))
+        row = np.empty(11)
+        x = np.empty(3)
+        nq = np.empty(3)
+        for q in range(c * CHUNK, min(m, (c + 1) * CHUNK)):
+            for a in range(3):
+                x[a] = query_points[q, a]
+                nq[a] = query_normals[q, a]
+            ok = (np.isfinite(x[0] + x[1] + x[2]) and support[q] > 0.0
+                  and _curvature_one(points, normals, point_weights, indices, indptr[q],
+                                     indptr[q + 1], query_rows[q], x, nq, support[q], hess,
+                                     row))
+            k1[q] = row[0] if ok else np.nan
+            k2[q] = row[1] if ok else np.nan
+            for a in range(3):
+                d1[q, a] = row[2 + a] if ok else np.nan
+                d2[q, a] = row[5 + a] if ok else np.nan
+                nout[q, a] = row[8 + a] if ok else np.nan

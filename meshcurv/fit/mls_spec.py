@@ -1,0 +1,79 @@
+"""Numpy specification of the MLS curvature (:mod:`meshcurv.fit.mls`): the potential of the
+oriented algebraic sphere fitted about a point, and the curvature of its zero set."""
+
+import numpy as np
+
+from .mls import STEP
+
+__all__ = ["potential", "mls_curvature_at"]
+
+
+def potential(x, points, normals, support, point_weights=None):
+    """The MLS potential F(x) (model units; 0 on the surface, growing along the normals):
+    the algebraic sphere ``u0 + u . y + u4 |y|^2`` fitted to the points and their unit normals
+    with the weights ``(1 - |p - x|^2 / support^2)^4`` about x (times ``point_weights``),
+    evaluated at x. NaN where the weights vanish or the fit is singular.
+
+    The fit (Guennebaud & Gross 2007, the oriented sphere fit), with sums over the weights w
+    of offsets q = p - x: ``u4 = (A W - P.N) / (2 (B W - |P|^2))``, ``u = (N - 2 u4 P) / W``,
+    ``u0 = -(u . P + u4 B) / W`` (W = sum w, P = sum w q, N = sum w n, A = sum w q.n,
+    B = sum w |q|^2); F(x) = u0.
+    """
+    q = np.asarray(points, dtype=np.float64) - np.asarray(x, dtype=np.float64)
+    n = np.asarray(normals, dtype=np.float64)
+    w = np.clip(1.0 - np.einsum("ij,ij->i", q, q) / (support * support), 0.0, None) ** 4
+    if point_weights is not None:
+        w = w * np.asarray(point_weights, dtype=np.float64)
+    keep = (w > 0) & np.isfinite(n).all(axis=1)
+    q, n, w = q[keep], n[keep], w[keep]
+    big_w = w.sum()
+    p_sum, n_sum = w @ q, w @ n
+    a_sum, b_sum = w @ np.einsum("ij,ij->i", q, n), w @ np.einsum("ij,ij->i", q, q)
+    den = b_sum * big_w - p_sum @ p_sum
+    if not (big_w > 0 and den > 0):
+        return np.nan
+    u4 = 0.5 * (a_sum * big_w - p_sum @ n_sum) / den
+    u = (n_sum - 2.0 * u4 * p_sum) / big_w
+    return -(u @ p_sum + u4 * b_sum) / big_w
+
+
+def mls_curvature_at(x, normal, points, normals, support, point_weights=None):
+    """Curvature of the MLS surface F = 0 (:func:`potential`) at x, by central differences of
+    F with the step ``STEP * support``.
+
+    Returns ``(k1, k2, d1, d2, n)``: curvatures (1 / model units, k1 >= k2, convex positive
+    about ``n``), unit directions and the unit normal grad F / |grad F| turned to ``normal``'s
+    side; NaNs where F is undefined at a stencil point.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    step = STEP * support
+    e = np.eye(3) * step
+
+    def f(d):
+        return potential(x + d, points, normals, support, point_weights)
+
+    f0 = f(np.zeros(3))
+    grad = np.array([(f(e[i]) - f(-e[i])) / (2 * step) for i in range(3)])
+    hess = np.empty((3, 3))
+    for i in range(3):
+        hess[i, i] = (f(e[i]) - 2 * f0 + f(-e[i])) / (step * step)
+        for j in range(i + 1, 3):
+            hess[i, j] = hess[j, i] = (f(e[i] + e[j]) + f(-e[i] - e[j]) - f(e[i] - e[j])
+                                       - f(e[j] - e[i])) / (4 * step * step)
+    nan = np.full(3, np.nan)
+    if not (np.isfinite(grad).all() and np.isfinite(hess).all()) or not grad.any():
+        return np.nan, np.nan, nan, nan, nan
+    if grad @ np.asarray(normal, dtype=np.float64) < 0:
+        grad, hess = -grad, -hess
+    length = np.linalg.norm(grad)
+    n = grad / length
+    axis = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    t1 = axis - (axis @ n) * n
+    t1 /= np.linalg.norm(t1)
+    t2 = np.cross(n, t1)
+    s11, s12, s22 = (t1 @ hess @ t1) / length, (t1 @ hess @ t2) / length, \
+        (t2 @ hess @ t2) / length
+    half_trace, disc = 0.5 * (s11 + s22), np.hypot(0.5 * (s11 - s22), s12)
+    theta = 0.5 * np.arctan2(2 * s12, s11 - s22)
+    d1 = np.cos(theta) * t1 + np.sin(theta) * t2
+    return half_trace + disc, half_trace - disc, d1, np.cross(n, d1), n

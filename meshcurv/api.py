@@ -290,7 +290,7 @@ def _estimate(v, f, given_normals, radius, query, plan, progress):
                                      plan._replace(wide_field=False), progress, radii=radii,
                                      run_radii=_run_radii)
     radius, coarse = _resolve_radius(radius, v, f, details=True)
-    if coarse and plan.coarse_mls and power_of_two_scale(radius) == 1.0:
+    if coarse and plan.coarse_mls:
         return _coarse_estimate(v, f, given_normals, radius, query, plan, progress)
     return _run_one(v, f, given_normals, radius, query, plan, progress)
 
@@ -300,13 +300,17 @@ def _coarse_estimate(v, f, given_normals, radius, query, plan, progress):
     (:func:`meshcurv.pipeline.run`), blended with the MLS curvature of the same vertices and
     normals (:mod:`meshcurv.coarse`). With ``query``, the circle fits also run at the vertices
     the queries' supports reach, whose normals the MLS fits use: the rows are those of the
-    whole mesh's estimate."""
-    h = coarse_mls.support(v, f, radius)
+    whole mesh's estimate. The MLS fits run on coordinates scaled by the power of two that
+    keeps the radius's square finite (exact: the same curvatures at any scale)."""
+    unit = power_of_two_scale(radius)
+    with np.errstate(over="ignore"):
+        vs = v * unit if unit != 1.0 else v
+    h = coarse_mls.support(vs, f, radius * unit)
     reach = float(h.max()) * (1.0 + 2.0 * STEP)
     if plan.use_kring:
-        search = pipeline.kring_search(v, f, reach).neighbors
+        search = pipeline.kring_search(vs, f, reach).neighbors
     else:
-        search = _ball_lists(v, reach)
+        search = _ball_lists(vs, reach)
     rows = np.arange(len(v)) if query is None else query
     reached = None if query is None else np.union1d(query, search(query)[1])
     res = _run_one(v, f, given_normals, radius, reached, plan, progress)
@@ -318,7 +322,8 @@ def _coarse_estimate(v, f, given_normals, radius, query, plan, progress):
         weights = np.ones(len(v))
         weights[reached] = outlier_weight(res.outlier_score)
         res = weld.expand_rows(res, np.searchsorted(reached, query))
-    return replace(res, **coarse_mls.mls_rows(res, rows, v, normals, weights, h[rows], search))
+    return replace(res, **coarse_mls.mls_rows(res, rows, vs, normals, weights, h[rows], search,
+                                              unit))
 
 
 def _ball_lists(v, radius):

@@ -67,9 +67,12 @@ def support(v, f, radius):
     return np.where(used, h, radius)
 
 
-def mls_rows(result, rows, v, normals, point_weights, h, search, block=16384):
+def mls_rows(result, rows, v, normals, point_weights, h, search, unit=1.0, block=16384):
     """The MLS estimate of the rows ``rows`` of ``result`` (vertex indices, (m,)), blended
     into a copy of its fields (k1, k2, d1, d2, normals) by the row's noise (module docstring).
+
+    ``v`` (n, 3) and ``h`` are the vertices and supports in the result's units times ``unit``
+    (a power of two that keeps squares finite; curvatures are scaled back by it).
 
     ``normals`` (n, 3): unit normals of every vertex the supports reach (NaN: left out);
     ``point_weights`` (n,) or None: the outlier weights; ``h`` (m,): each row's support;
@@ -88,7 +91,9 @@ def mls_rows(result, rows, v, normals, point_weights, h, search, block=16384):
                       point_weights, (k1[sl], k2[sl], d1[sl], d2[sl], n[sl]))
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
         g = 1.0 / (1.0 + (np.asarray(result.noise) / (NOISE_SCALE * result.radius)) ** 4)
-    use = np.asarray(result.valid) & np.isfinite(k1) & np.isfinite(g)
+    with np.errstate(over="ignore"):
+        k1, k2 = k1 * unit, k2 * unit
+    use = np.asarray(result.valid) & np.isfinite(k1) & np.isfinite(k2) & np.isfinite(g)
     g = np.where(use, g, 0.0)
     out = {"k1": g * np.where(use, k1, 0.0) + (1.0 - g) * result.k1,
            "k2": g * np.where(use, k2, 0.0) + (1.0 - g) * result.k2}

@@ -62,7 +62,7 @@ def test_kernel_matches_the_specification():
             e1, e2, f1, f2, fn = mls_curvature_at(v[q], truth.normals[q], v[found[i]],
                                                   truth.normals[found[i]], 0.42,
                                                   None if w is None else w[found[i]])
-            # central differences amplify the summation order's rounding by 1 / STEP^2
+            # central differences amplify the summation order's rounding by 1 / STEP^2 (1e8)
             assert k1[i] == pytest.approx(e1, rel=1e-7, abs=1e-7)
             assert k2[i] == pytest.approx(e2, rel=1e-7, abs=1e-7)
             assert np.allclose(n[i], fn, atol=1e-9)
@@ -154,3 +154,20 @@ def test_noise_leaves_coarse_tori_to_the_circle_fits():
         alone = _mean_dk(meshcurv.principal_curvatures(noisy, f, coarse_meshes="circles"),
                          truth)
         assert both < most * alone
+
+
+def test_coarse_estimate_is_invariant_to_rotation_translation_and_scale():
+    # the central differences' truncation and rounding: ~1e-8 of k (see mls.STEP)
+    from scipy.spatial.transform import Rotation
+
+    v, f, _ = _coarse_torus()
+    base = meshcurv.principal_curvatures(v, f)
+    turn = Rotation.from_euler("xyz", [0.3, 1.1, -0.7]).as_matrix()
+    moved = meshcurv.principal_curvatures(v @ turn.T + [5.0, -2.0, 1.0], f)
+    assert np.allclose(moved.k1, base.k1, rtol=0, atol=1e-6)
+    assert np.allclose(moved.normals, base.normals @ turn.T, rtol=0, atol=1e-7)
+    for scale in (1e-3, 2.0 ** -700, 2.0 ** 600):
+        res = meshcurv.principal_curvatures(v * scale, f)
+        assert res.valid.all()
+        assert np.allclose(res.k1 * scale, base.k1, rtol=0, atol=1e-6)
+        assert np.allclose(res.k2 * scale, base.k2, rtol=0, atol=1e-6)

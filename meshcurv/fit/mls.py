@@ -27,10 +27,11 @@ from ..linalg import CHUNK
 __all__ = ["mls_curvature", "STEP"]
 
 # Central-difference step, a fraction of the support h: F is smooth on the scale h, so the
-# truncation error is ~STEP^2 relative (1e-6), and its values near the surface are ~|grad F|
-# times the step, so the rounding error of the second differences is ~1e-16 / STEP^2 = 1e-10
-# relative.
-STEP = 1e-3
+# truncation error is ~STEP^2 relative, and its values near the surface are ~|grad F| times
+# the step, so the rounding error of the second differences is ~1e-16 / STEP^2 relative; 1e-4
+# balances the two at ~1e-8 (a coarse torus rotated or scaled by 1e-3 moves k by 4e-8 of
+# itself; 5e-7 with 1e-3, mostly the truncation's dependence on the axes).
+STEP = 1e-4
 
 
 @njit(cache=True)

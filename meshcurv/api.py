@@ -4,14 +4,9 @@ power-of-two rescaling of extreme scales) and options; the work itself is
 :func:`meshcurv.pipeline.run` (and :mod:`meshcurv.scale` for "auto").
 """
 
-from dataclasses import replace
-
 import numpy as np
-from scipy.spatial import cKDTree
 
 from . import coarse as coarse_mls, pipeline, scale as scale_select, weld
-from .fit.mls import STEP
-from .fit.outliers import outlier_weight
 from .inputs import as_arrays
 from .neighbors import MAX_BALL_FRACTION, default_radius, power_of_two_scale
 from .options import Options, resolve_plan
@@ -296,49 +291,12 @@ def _estimate(v, f, given_normals, radius, query, plan, progress):
 
 
 def _coarse_estimate(v, f, given_normals, radius, query, plan, progress):
-    """The estimate of a mesh coarse for its shape at its default ``radius``: the circle fits'
-    (:func:`meshcurv.pipeline.run`), blended with the MLS curvature of the same vertices and
-    normals (:mod:`meshcurv.coarse`). With ``query``, the circle fits also run at the vertices
-    the queries' supports reach, whose normals the MLS fits use: the rows are those of the
-    whole mesh's estimate. The MLS fits run on coordinates scaled by the power of two that
-    keeps the radius's square finite (exact: the same curvatures at any scale)."""
-    unit = power_of_two_scale(radius)
-    with np.errstate(over="ignore"):
-        vs = v * unit if unit != 1.0 else v
-    h = coarse_mls.support(vs, f, radius * unit)
-    reach = float(h.max()) * (1.0 + 2.0 * STEP)
-    if plan.use_kring:
-        search = pipeline.kring_search(vs, f, reach).neighbors
-    else:
-        search = _ball_lists(vs, reach)
-    rows = np.arange(len(v)) if query is None else query
-    reached = None if query is None else np.union1d(query, search(query)[1])
-    res = _run_one(v, f, given_normals, radius, reached, plan, progress)
-    normals = res.normals
-    weights = outlier_weight(res.outlier_score)
-    if reached is not None:
-        normals = np.full(v.shape, np.nan)
-        normals[reached] = res.normals
-        weights = np.ones(len(v))
-        weights[reached] = outlier_weight(res.outlier_score)
-        res = weld.expand_rows(res, np.searchsorted(reached, query))
-    return replace(res, **coarse_mls.mls_rows(res, rows, vs, normals, weights, h[rows], search,
-                                              unit))
-
-
-def _ball_lists(v, radius):
-    """``lists(idx) -> (indptr, indices)``: the rows of ``v`` within ``radius`` of ``v[idx]``
-    (k-d tree; NaN rows never listed)."""
-    finite = np.flatnonzero(np.isfinite(v).all(axis=1))
-    tree = cKDTree(v[finite])
-
-    def lists(idx):
-        found = tree.query_ball_point(v[idx], radius)
-        indptr = np.zeros(len(idx) + 1, dtype=np.int64)
-        indptr[1:] = np.cumsum([len(a) for a in found])
-        flat = np.concatenate(found).astype(np.int64) if len(idx) else np.zeros(0, np.int64)
-        return indptr, finite[flat]
-    return lists
+    """The estimate of a mesh coarse for its shape at its default ``radius``: the circle fits
+    (:func:`meshcurv.pipeline.run`) blended with the MLS curvature of the same vertices
+    (:func:`meshcurv.coarse.estimate`)."""
+    def circle_fits(rows):
+        return _run_one(v, f, given_normals, radius, rows, plan, progress)
+    return coarse_mls.estimate(v, f, radius, query, circle_fits, plan.use_kring)
 
 
 def _run_radii(v, f, given_normals, radii, query, plan, progress):

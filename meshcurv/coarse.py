@@ -14,33 +14,42 @@ normals (support :func:`support`) gives 0.0068, 0.0027, 0.0057 and 0.019 there o
 It is more sensitive to position noise, so the two are blended row by row by the noise the
 local jet measured: ``g = 1 / (1 + (noise / (NOISE_SCALE radius))^4)`` of the MLS estimate.
 Shape alone gives noise / radius 0.002-0.006 on those clean tori; Gaussian noise along the
-normal of 0.1 % of the diagonal 0.012-0.017, of 0.3 % 0.034-0.044. Mean |dk|, circle fits
-alone -> blended, the four tori in the order above (measured once with a script):
+normal of 0.1 % of the diagonal 0.012-0.017, of 0.3 % 0.034-0.044. Mean |dk|, the four tori
+in the order above (measured once with a script; :data:`PASSES` MLS passes):
 
 ==========  ===================================  ===================================
 noise       circle fits alone                    blended (NOISE_SCALE 0.015)
 ==========  ===================================  ===================================
-0           0.041, 0.022, 0.028, 0.069           0.0074, 0.0027, 0.0055, 0.016
-0.05 %      0.086, 0.019, 0.029, 0.073           0.031, 0.014, 0.016, 0.037
-0.1 %       0.077, 0.019, 0.031, 0.079           0.044, 0.017, 0.025, 0.057
+0           0.041, 0.022, 0.028, 0.069           0.0058, 0.0019, 0.0044, 0.018
+0.05 %      0.086, 0.019, 0.029, 0.073           0.026, 0.011, 0.015, 0.031
+0.1 %       0.077, 0.019, 0.031, 0.079           0.044, 0.017, 0.025, 0.056
+0.2 %       0.073, 0.023, 0.043, 0.091           0.066, 0.022, 0.036, 0.085
 0.3 %       0.063, 0.026, 0.046, 0.105           0.066, 0.027, 0.046, 0.104
 0.5 %       0.085, 0.034, 0.067, 0.142           0.086, 0.034, 0.066, 0.142
 ==========  ===================================  ===================================
 
-With NOISE_SCALE 0.02 the clean and 0.05 % rows gain a little more (0.0068 on the first
-torus) and the 0.3 % row loses more (0.072 on the first torus, 14 % worse than the circle
-fits alone); 0.015 keeps every loss within 5 %.
+With NOISE_SCALE 0.02 (one pass) the clean and 0.05 % rows gained a little more (0.0068
+against 0.0074 on the first torus) and the 0.3 % row lost more (0.072 on the first torus,
+14 % worse than the circle fits alone); 0.015 keeps every loss within 5 %.
 
 Used where the radius is the default and the input has faces (``Options.coarse_meshes``);
 clouds keep the circle fits (their rings are not known).
 """
 
+from dataclasses import replace
+
 import numpy as np
+from scipy.spatial import cKDTree
 
-from .fit.mls import mls_curvature
+from .fit.mls import STEP, mls_curvature
+from .fit.outliers import outlier_weight
+from .neighbors import power_of_two_scale
 from .neighbors.radius import _longest_edges
+from .pipeline import kring_search
+from .weld import expand_rows
 
-__all__ = ["support", "mls_rows", "SUPPORT_EDGES", "SUPPORT_CAP", "NOISE_SCALE"]
+__all__ = ["estimate", "support", "mls_rows", "SUPPORT_EDGES", "SUPPORT_CAP", "NOISE_SCALE",
+           "PASSES"]
 
 # The MLS support h of a vertex reaches this many times its longest edge: its whole 1-ring
 # then weighs at least (1 - 1/4)^4 = 0.32 in the weights (1 - d^2 / h^2)^4, which fall to 0.01
@@ -56,6 +65,65 @@ SUPPORT_CAP = 2.0
 # Noise (the local jet's RMS residual at the radius) over the radius at which the MLS estimate
 # and the circle fits share a row equally (see the module's docstring).
 NOISE_SCALE = 0.015
+
+
+# MLS passes: each one after the first fits the normals of the one before (the MLS surface's
+# own, where the blend gives it the larger share). The circle fits' normals are 0.2-0.7 degrees
+# off on the coarse tori of the module's docstring, the first pass's 0.06-0.15 degrees; mean
+# |dk| of the MLS surface alone, one pass -> two: 0.0068, 0.0027, 0.0057, 0.019 -> 0.0054,
+# 0.0019, 0.0045, 0.020 (a third pass: 0.0050, 0.0017, 0.0042, 0.021).
+PASSES = 2
+
+
+def estimate(v, f, radius, query, circle_fits, use_kring=True):
+    """The curvature of a mesh coarse for its shape: the circle fits' result blended with
+    :data:`PASSES` MLS passes (:func:`mls_rows`), rows ``query`` (all: None) in its order.
+
+    ``circle_fits(rows)`` returns the circle fits' :class:`meshcurv.CurvatureResult` at the
+    vertex indices ``rows`` (None: all) at ``radius``; with ``query`` they also run where
+    the queries' supports reach, and those rows' MLS passes where the next pass's supports
+    do, so that every row is the whole mesh's. Supports are searched over the mesh's k-rings
+    (``use_kring``) or in balls. The MLS fits run on coordinates scaled by the power of two
+    that keeps the radius's square finite (the same curvatures at any scale).
+    """
+    unit = power_of_two_scale(radius)
+    with np.errstate(over="ignore"):
+        vs = v * unit if unit != 1.0 else v
+    h = support(vs, f, radius * unit)
+    reach = float(h.max()) * (1.0 + 2.0 * STEP)
+    search = kring_search(vs, f, reach).neighbors if use_kring else _ball_lists(vs, reach)
+    n = len(v)
+    # rows of the circle fits, then of each pass; the last pass's are the queries
+    wanted = [np.arange(n) if query is None else np.asarray(query)]
+    for _ in range(PASSES):
+        wanted.insert(0, wanted[0] if query is None else
+                      np.union1d(wanted[0], search(wanted[0])[1]))
+    base = circle_fits(None if query is None else wanted[0])
+    normals = np.full((n, 3), np.nan)
+    normals[wanted[0]] = base.normals
+    weights = np.ones(n)
+    weights[wanted[0]] = outlier_weight(base.outlier_score)
+    for rows in wanted[1:]:
+        part = base if query is None else expand_rows(base, np.searchsorted(wanted[0], rows))
+        fields = mls_rows(part, rows, vs, normals, weights, h[rows], search, unit)
+        normals = normals.copy()
+        normals[rows] = fields["normals"]
+    return replace(part, **fields)
+
+
+def _ball_lists(v, radius):
+    """``lists(idx) -> (indptr, indices)``: the rows of ``v`` within ``radius`` of ``v[idx]``
+    (k-d tree; NaN rows never listed)."""
+    finite = np.flatnonzero(np.isfinite(v).all(axis=1))
+    tree = cKDTree(v[finite])
+
+    def lists(idx):
+        found = tree.query_ball_point(v[idx], radius)
+        indptr = np.zeros(len(idx) + 1, dtype=np.int64)
+        indptr[1:] = np.cumsum([len(a) for a in found])
+        flat = np.concatenate(found).astype(np.int64) if len(idx) else np.zeros(0, np.int64)
+        return indptr, finite[flat]
+    return lists
 
 
 def support(v, f, radius):

@@ -259,7 +259,7 @@ class Options:
         default radius: "mls" blends in, row by row as the measured noise allows, the
         curvature of the MLS surface of oriented spheres through the vertices and the circle
         fits' normals (:mod:`meshcurv.coarse`; trimesh tori of 16-32 vertices around the
-        tube: mean |dk| 0.0027-0.019 instead of 0.022-0.069); the normals, d1 and d2 of those
+        tube: mean |dk| 0.0019-0.018 instead of 0.022-0.069); the normals, d1 and d2 of those
         rows are the MLS surface's. "circles": the circle fits alone. A given radius, a list
         of radii, "auto" and clouds always use the circle fits alone.
 

@@ -168,6 +168,9 @@ def test_smallest_configuration_of_every_group_runs(tmp_path):
     assert len(results["coarse"]) == 4                          # 2 tori x (mesh, points)
     # trimesh's own torus grid: the default radius stays on the tube (mean |dk| 0.377 before)
     assert all(r["valid"] == 1.0 and r["mean_dk"] < 0.05 for r in results["coarse"][:2])
+    # ... and its mesh gets the MLS blend (0.0044; 0.028 with the circle fits alone)
+    assert results["coarse"][0]["method"] == "meshcurv, mesh"
+    assert results["coarse"][0]["mean_dk"] < 0.01
     assert {r["method"] for r in results["spikes"]} == {"meshcurv, mesh", "meshcurv, points"}
     if CNC_DIR:
         modes = {(r["method"], r["radius_rule"]) for r in results["cnc"]}

@@ -1,7 +1,8 @@
-"""Meshes coarse for their shape: the curvature of the MLS surface of oriented spheres
-(:mod:`meshcurv.fit.mls`) where the circle fits have too few vertices per normal section.
+"""Inputs coarse for their shape: the curvature of the MLS surface of oriented spheres
+(:mod:`meshcurv.fit.mls`) where the circle fits have too few points per normal section.
 
-A mesh is coarse for its shape where a ball holding ~100 vertices would reach around it, so
+A mesh or cloud is coarse for its shape where a ball holding ~100 points would reach around
+it, so
 that the default radius had to be made smaller to stay on a local patch
 (:func:`meshcurv.neighbors.default_radius` with ``details``: a low-poly torus of 16 vertices
 around the tube). Each of the 2 x 8 half-sets of a circle fit then holds a few vertices at
@@ -32,8 +33,12 @@ With NOISE_SCALE 0.02 (one pass) the clean and 0.05 % rows gained a little more 
 against 0.0074 on the first torus) and the 0.3 % row lost more (0.072 on the first torus,
 14 % worse than the circle fits alone); 0.015 keeps every loss within 5 %.
 
-Used where the radius is the default and the input has faces (``Options.coarse_meshes``);
-clouds keep the circle fits (their rings are not known).
+The same tori as clouds of their vertices (the circle fits with the cloud's own normals):
+0.054, 0.019, 0.028, 0.068 alone, 0.013, 0.0025, 0.0041, 0.018 blended; with 0.1 % noise
+0.076, 0.019, 0.031, 0.081 -> 0.041, 0.013, 0.025, 0.060, with 0.3 % 0.0630, 0.026, 0.047,
+0.105 -> 0.0634, 0.026, 0.046, 0.104.
+
+Used where the radius is the default (``Options.coarse_fit``).
 """
 
 from dataclasses import replace
@@ -45,11 +50,11 @@ from .fit.mls import STEP, mls_curvature
 from .fit.outliers import outlier_weight
 from .neighbors import power_of_two_scale
 from .neighbors.radius import _longest_edges
-from .pipeline import kring_search
+from .pipeline import ball_search, kring_search
 from .weld import expand_rows
 
-__all__ = ["estimate", "support", "mls_rows", "SUPPORT_EDGES", "SUPPORT_CAP", "NOISE_SCALE",
-           "PASSES"]
+__all__ = ["estimate", "support", "mls_rows", "SUPPORT_EDGES", "CLOUD_RING", "SUPPORT_CAP",
+           "NOISE_SCALE", "PASSES"]
 
 # The MLS support h of a vertex reaches this many times its longest edge: its whole 1-ring
 # then weighs at least (1 - 1/4)^4 = 0.32 in the weights (1 - d^2 / h^2)^4, which fall to 0.01
@@ -57,6 +62,13 @@ __all__ = ["estimate", "support", "mls_rows", "SUPPORT_EDGES", "SUPPORT_CAP", "N
 # 2 / 0.5: 0.10 around the tube, 0.49 along it) left the far neighbours out and the fit
 # degenerate in that direction (mean |dk| 0.30).
 SUPPORT_EDGES = 2.0
+
+# A cloud point's reach: the distance to its 12th nearest point, about two rings of an even
+# sampling (6 points each); on a sampling twice as fine one way as the other (the 32 x 32
+# torus's points) the 6 nearest all lie along the fine direction and a support from them
+# left the fit degenerate the other way (mean |dk| 0.11 and 0.67 on the two 32 x 32 tori,
+# 0.0041 and 0.018 from the 12th).
+CLOUD_RING = 12
 
 # ... and at most this many radii (the normal field's reach, see pipeline.FIELD_RATIO): a few
 # long slivers do not widen every list.
@@ -76,14 +88,14 @@ PASSES = 2
 
 
 def estimate(v, f, radius, query, circle_fits, use_kring=True):
-    """The curvature of a mesh coarse for its shape: the circle fits' result blended with
+    """The curvature of a mesh or cloud coarse for its shape: the circle fits' result blended with
     :data:`PASSES` MLS passes (:func:`mls_rows`), rows ``query`` (all: None) in its order.
 
     ``circle_fits(rows)`` returns the circle fits' :class:`meshcurv.CurvatureResult` at the
     vertex indices ``rows`` (None: all) at ``radius``; with ``query`` they also run where
     the queries' supports reach, and those rows' MLS passes where the next pass's supports
-    do, so that every row is the whole mesh's. Supports are searched over the mesh's k-rings
-    (``use_kring``) or in balls. The MLS fits run on coordinates scaled by the power of two
+    do, so that every row is the whole input's. Supports are searched over the mesh's k-rings
+    (``use_kring``) or in balls (clouds: ``f`` None). The MLS fits run on coordinates scaled by the power of two
     that keeps the radius's square finite (the same curvatures at any scale).
     """
     unit = power_of_two_scale(radius)
@@ -91,7 +103,8 @@ def estimate(v, f, radius, query, circle_fits, use_kring=True):
         vs = v * unit if unit != 1.0 else v
     h = support(vs, f, radius * unit)
     reach = float(h.max()) * (1.0 + 2.0 * STEP)
-    search = kring_search(vs, f, reach).neighbors if use_kring else _ball_lists(vs, reach)
+    search = _lists(kring_search(vs, f, reach) if use_kring else
+                    ball_search(vs, np.flatnonzero(np.isfinite(vs).all(axis=1)), reach))
     n = len(v)
     # rows of the circle fits, then of each pass; the last pass's are the queries
     wanted = [np.arange(n) if query is None else np.asarray(query)]
@@ -111,27 +124,32 @@ def estimate(v, f, radius, query, circle_fits, use_kring=True):
     return replace(part, **fields)
 
 
-def _ball_lists(v, radius):
-    """``lists(idx) -> (indptr, indices)``: the rows of ``v`` within ``radius`` of ``v[idx]``
-    (k-d tree; NaN rows never listed)."""
-    finite = np.flatnonzero(np.isfinite(v).all(axis=1))
-    tree = cKDTree(v[finite])
-
+def _lists(search):
+    """``lists(idx) -> (indptr, indices)`` of a :class:`meshcurv.pipeline.Search`, the indices
+    rows of the input (a ball search's lists index its grid's copy)."""
     def lists(idx):
-        found = tree.query_ball_point(v[idx], radius)
-        indptr = np.zeros(len(idx) + 1, dtype=np.int64)
-        indptr[1:] = np.cumsum([len(a) for a in found])
-        flat = np.concatenate(found).astype(np.int64) if len(idx) else np.zeros(0, np.int64)
-        return indptr, finite[flat]
+        indptr, indices = search.neighbors(idx)
+        return indptr, indices if search.rank is None else search.rank[indices]
     return lists
 
 
 def support(v, f, radius):
-    """The MLS support h (n,) of each vertex, model units: ``SUPPORT_EDGES`` times its longest
-    edge, at least ``radius`` and at most ``SUPPORT_CAP * radius`` (``radius`` for vertices
-    without a finite edge)."""
-    longest, used = _longest_edges(np.asarray(v, dtype=np.float64), np.asarray(f, np.int64))
-    h = np.clip(SUPPORT_EDGES * longest, radius, SUPPORT_CAP * radius)
+    """The MLS support h (n,) of each point, model units: ``SUPPORT_EDGES`` times its reach,
+    at least ``radius`` and at most ``SUPPORT_CAP * radius``. The reach is a mesh vertex's
+    longest edge (faces ``f``), or a cloud point's distance to its ``CLOUD_RING``-th nearest
+    point (``f`` None); ``radius`` where there is none."""
+    v = np.asarray(v, dtype=np.float64)
+    if f is not None:
+        reach, used = _longest_edges(v, np.asarray(f, np.int64))
+    else:
+        finite = np.flatnonzero(np.isfinite(v).all(axis=1))
+        reach, used = np.zeros(len(v)), np.zeros(len(v), dtype=bool)
+        k = min(CLOUD_RING, len(finite) - 1)
+        if k >= 1:
+            d, _ = cKDTree(v[finite]).query(v[finite], k=k + 1, workers=-1)
+            reach[finite] = d[:, k]
+            used[finite] = np.isfinite(d[:, k])
+    h = np.clip(SUPPORT_EDGES * np.where(used, reach, 0.0), radius, SUPPORT_CAP * radius)
     return np.where(used, h, radius)
 
 

@@ -16,7 +16,7 @@ __all__ = ["Options", "OPTION_NAMES", "CHOICES", "ORIENTATIONS", "MAX_DIRECTIONS
 SWITCH_NAMES = ("slab", "min_points", "min_spread", "weighting", "circle_normalization",
                 "section_blend", "robust", "half_frequency", "bias_correction",
                 "normal_estimation", "refine_normals", "orientation", "normal_fit",
-                "normal_constraints", "robust_points", "sparse_retry", "coarse_meshes")
+                "normal_constraints", "robust_points", "sparse_retry", "coarse_fit")
 # Every option of principal_curvatures besides the data (vertices, faces, normals) and the
 # call's own arguments (options, query, progress): its three public knobs and the switches.
 OPTION_NAMES = ("radius", "n_directions", "neighborhood") + SWITCH_NAMES
@@ -28,7 +28,7 @@ CHOICES = {"neighborhood": ("auto", "kring", "ball"),
            "circle_normalization": ("tangent", "unit"),
            "normal_fit": ("auto", "sphere", "quadric"),
            "normal_constraints": ("auto", "off"),
-           "coarse_meshes": ("mls", "circles")}
+           "coarse_fit": ("mls", "circles")}
 
 # The named values of ``orientation`` (besides a (3,) viewpoint).
 ORIENTATIONS = ("mst", "+z")
@@ -253,15 +253,16 @@ class Options:
         is dropped (``TOO_FEW_NEIGHBORS``). ``result.n_neighbors`` is the count of the ball
         used; ``result.radius`` stays the call's. False: every vertex at ``radius`` alone
         (tiled runs, whose halo covers that radius only).
-    coarse_meshes : {"mls", "circles"}, default "mls"
-        Meshes coarse for their shape (the default radius had to be made smaller because
-        balls of ~100 vertices reached around the shape: a low-poly torus), estimated at their
+    coarse_fit : {"mls", "circles"}, default "mls"
+        Inputs coarse for their shape (the default radius had to be made smaller because
+        balls of ~100 points reached around the shape: a low-poly torus), estimated at their
         default radius: "mls" blends in, row by row as the measured noise allows, the
-        curvature of the MLS surface of oriented spheres through the vertices and the circle
+        curvature of the MLS surface of oriented spheres through the points and the circle
         fits' normals (:mod:`meshcurv.coarse`; trimesh tori of 16-32 vertices around the
-        tube: mean |dk| 0.0019-0.018 instead of 0.022-0.069); the normals, d1 and d2 of those
-        rows are the MLS surface's. "circles": the circle fits alone. A given radius, a list
-        of radii, "auto" and clouds always use the circle fits alone.
+        tube: mean |dk| 0.0019-0.018 instead of 0.022-0.069 on the meshes, 0.0025-0.018
+        instead of 0.019-0.068 on their points alone); the normals, d1 and d2 of those rows are
+        the MLS surface's. "circles": the circle fits alone. A given radius, a list of radii
+        and "auto" always use the circle fits alone.
 
     Examples
     --------
@@ -289,7 +290,7 @@ class Options:
     normal_constraints: str = "auto"
     robust_points: bool = True
     sparse_retry: bool = True
-    coarse_meshes: str = "mls"
+    coarse_fit: str = "mls"
 
     def __post_init__(self):
         check_options(**self.as_dict())
@@ -340,7 +341,8 @@ class Plan(NamedTuple):
     :func:`meshcurv.pipeline.field_mix`; off under ``radius="auto"``, whose
     ladder widens the balls themselves where the noise asks for it: CNC clouds without
     normals at sigma_eps 0.1, mean |dH| 0.0095 with the field at each radius, 0.0119 with it
-    wider).
+    wider). ``coarse_mls``: inputs coarse for their shape, at their default radius, blended
+    with the MLS surface's curvature (:mod:`meshcurv.coarse`).
     """
 
     use_kring: bool
@@ -366,7 +368,7 @@ def resolve_plan(has_faces, has_normals, n_directions=8, neighborhood="auto", sl
                  half_frequency=False, bias_correction=True, normal_estimation="auto",
                  refine_normals=None, orientation="mst", normal_fit="auto",
                  normal_constraints="auto", robust_points=True, sparse_retry=True,
-                 coarse_meshes="mls"):
+                 coarse_fit="mls"):
     """The :class:`Plan` of a call with these options (the defaults of
     :func:`meshcurv.principal_curvatures`) on input with or without faces and given normals.
 
@@ -383,7 +385,7 @@ def resolve_plan(has_faces, has_normals, n_directions=8, neighborhood="auto", sl
                                 circle_normalization=circle_normalization,
                                 n_directions=n_directions, normal_fit=normal_fit,
                                 normal_constraints=normal_constraints,
-                                coarse_meshes=coarse_meshes)
+                                coarse_fit=coarse_fit)
     if neighborhood == "kring" and not has_faces:
         raise ValueError("neighborhood='kring' needs faces")
     if normal_estimation == "faces" and not has_normals and not has_faces:
@@ -409,4 +411,4 @@ def resolve_plan(has_faces, has_normals, n_directions=8, neighborhood="auto", sl
                 bool(bias_correction), fit, normal_fit, has_normals and auto,
                 normal_constraints == "auto", bool(robust_points),
                 bool(sparse_retry), normals == "pca" and has_faces and normal_estimation == "auto",
-                coarse_mls=has_faces and coarse_meshes == "mls")
+                coarse_mls=coarse_fit == "mls")

@@ -122,7 +122,7 @@ def test_coarse_tori_get_the_mls_curvature(torus, circles, limit):
     assert default_radius(v, faces=f, details=True)[1]
     res = meshcurv.principal_curvatures(v, f)
     assert res.valid.all() and _mean_dk(res, truth) < limit
-    alone = meshcurv.principal_curvatures(v, f, coarse_meshes="circles")
+    alone = meshcurv.principal_curvatures(v, f, coarse_fit="circles")
     assert _mean_dk(alone, truth) == pytest.approx(circles, abs=1e-4)
     # the result's frame is the MLS surface's: right-handed, unit, normals outward
     assert np.allclose(np.cross(res.normals, res.d1), res.d2, atol=1e-9)
@@ -132,13 +132,44 @@ def test_coarse_tori_get_the_mls_curvature(torus, circles, limit):
     assert np.array_equal(fixed.k1, alone.k1, equal_nan=True)
 
 
-def test_coarse_queries_give_the_rows_of_the_whole_mesh():
+@pytest.mark.parametrize("torus, circles, limit", [
+    ((1.0, 0.3, 64, 16), 0.0535, 0.02),
+    ((3.0, 1.0, 40, 20), 0.0188, 0.005),
+    ((2.0, 0.5, 32, 32), 0.0283, 0.008),
+    ((1.0, 0.2, 32, 32), 0.0679, 0.025)])
+def test_coarse_tori_as_clouds_get_the_mls_curvature(torus, circles, limit):
+    # the same vertices without faces (a support of the 12th nearest point's distance):
+    # measured 0.013, 0.0025, 0.0041, 0.018
+    v, _, truth = _coarse_torus(*torus)
+    assert default_radius(v, details=True)[1]
+    res = meshcurv.principal_curvatures(v)
+    assert res.valid.all() and _mean_dk(res, truth) < limit
+    alone = meshcurv.principal_curvatures(v, coarse_fit="circles")
+    assert _mean_dk(alone, truth) == pytest.approx(circles, abs=1e-4)
+
+
+@pytest.mark.parametrize("faces", [True, False])
+def test_coarse_queries_give_the_rows_of_the_whole_input(faces):
     v, f, _ = _coarse_torus()
+    f = f if faces else None
     whole = meshcurv.principal_curvatures(v, f)
-    q = np.array([7, 500, 3, 1000])
+    q = np.array([7, 500, 3, 1000, 7])
     part = meshcurv.principal_curvatures(v, f, query=q)
     for name in ("k1", "k2", "d1", "d2", "normals", "noise"):
         assert np.allclose(getattr(part, name), getattr(whole, name)[q], rtol=0, atol=1e-12)
+
+
+def test_inputs_not_coarse_for_their_shape_keep_the_circle_fits():
+    # an icosphere of 642 vertices and a 120 x 30 torus: the default radius is not shrunk
+    for mesh in (trimesh.creation.icosphere(3), trimesh.creation.torus(
+            2.0, 0.5, major_sections=120, minor_sections=30)):
+        v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+        for faces in (f, None):
+            assert not default_radius(v, faces=faces, details=True)[1]
+            a = meshcurv.principal_curvatures(v, faces)
+            b = meshcurv.principal_curvatures(v, faces, coarse_fit="circles")
+            assert np.array_equal(a.k1, b.k1, equal_nan=True)
+            assert np.array_equal(a.normals, b.normals, equal_nan=True)
 
 
 def test_noise_leaves_coarse_tori_to_the_circle_fits():
@@ -151,7 +182,7 @@ def test_noise_leaves_coarse_tori_to_the_circle_fits():
     for sigma, most in ((0.005, 1.05), (0.0005, 0.5)):
         noisy = v + sigma * diag * step
         both = _mean_dk(meshcurv.principal_curvatures(noisy, f), truth)
-        alone = _mean_dk(meshcurv.principal_curvatures(noisy, f, coarse_meshes="circles"),
+        alone = _mean_dk(meshcurv.principal_curvatures(noisy, f, coarse_fit="circles"),
                          truth)
         assert both < most * alone
 

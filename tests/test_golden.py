@@ -68,6 +68,7 @@ def _cases():
                                              query=np.arange(0, len(para.vertices), 7)),
         # coarse for its shape at the default radius: circle fits blended with MLS curvature
         "coarse_torus_mls": lambda: pc(coarse.vertices, coarse.faces),
+        "coarse_torus_cloud_mls": lambda: pc(coarse.vertices),
     }
 
 

@@ -87,14 +87,14 @@ def default_radius(points, target_neighbors=100, sample=20000, seed=0, faces=Non
     ----------
     points : (n, 3) float, NaN rows ignored
     faces : (m, 3) int, optional, the mesh's triangles (valid indices into ``points``)
-    details : bool, also say whether the mesh is coarse for its shape
+    details : bool, also say whether the input is coarse for its shape
 
     Returns
     -------
     float (NaN if there are fewer than 2 distinct finite points); with ``details``,
-    ``(radius, coarse)``: ``coarse`` is True where a mesh's radius was made smaller because
-    its balls reached beyond a local patch (:func:`_local_patch`), i.e. where a ball holding
-    ~100 vertices spans much of the shape
+    ``(radius, coarse)``: ``coarse`` is True where the radius was made smaller because its
+    balls reached beyond a local patch (:func:`_local_patch`), i.e. where a ball holding
+    ~100 points spans much of the shape
     """
     p = np.asarray(points, dtype=np.float64)
     p = p[np.isfinite(p).all(axis=1)]
@@ -107,13 +107,12 @@ def default_radius(points, target_neighbors=100, sample=20000, seed=0, faces=Non
         radius, coarse = default_radius(scaled, target_neighbors, sample, seed, faces, True)
         return (radius / s, coarse) if details else radius / s
     mesh = faces is not None and len(faces) > 0
-    coarse = False
-    radius = _default_radius(p, target_neighbors, sample, seed, patch=not mesh)
+    radius, coarse = _default_radius(p, target_neighbors, sample, seed, patch=not mesh)
     if not np.isfinite(radius):
         # most points duplicated (coincident points are nobody's neighbor): distinct ones
         p = np.unique(p, axis=0)
-        radius = (_default_radius(p, target_neighbors, sample, seed, patch=not mesh)
-                  if len(p) > 1 else radius)
+        if len(p) > 1:
+            radius, coarse = _default_radius(p, target_neighbors, sample, seed, patch=not mesh)
     if mesh and np.isfinite(radius):
         v = np.asarray(points, dtype=np.float64)
         f = np.asarray(faces, dtype=np.int64)
@@ -242,9 +241,10 @@ def _longest_edges(v, f):
 
 
 def _default_radius(p, target_neighbors, sample, seed, patch=True):
-    """The density rule of :func:`default_radius` on the finite points ``p``, grown where
-    too few points lie in its median ball and, with ``patch``, shrunk where its balls reach
-    beyond a local patch (not below half of it: a quarter of the points)."""
+    """``(radius, shrunk)``: the density rule of :func:`default_radius` on the finite points
+    ``p``, grown where too few points lie in its median ball and, with ``patch``, shrunk
+    where its balls reach beyond a local patch (not below half of it: a quarter of the
+    points), and whether it was."""
     target_neighbors = min(target_neighbors, MAX_BALL_FRACTION * len(p))
     k = max(1, min(16, len(p) - 1, int(target_neighbors)))
     rng = np.random.default_rng(seed)
@@ -254,7 +254,7 @@ def _default_radius(p, target_neighbors, sample, seed, patch=True):
     with np.errstate(over="ignore"):
         dk2 = np.median(d[:, k] ** 2)
     if not (np.isfinite(dk2) and dk2 > 0):
-        return float("nan")
+        return float("nan"), False
     # the target counts distinct positions (the fits skip a point's copies): a cloud merged
     # with a copy of itself keeps its radius, measured at as many distinct neighbors
     share = _points_per_position(d)
@@ -264,14 +264,18 @@ def _default_radius(p, target_neighbors, sample, seed, patch=True):
         d, _ = tree.query(probe, k=k + 1, workers=-1)
         with np.errstate(over="ignore"):
             dk2 = np.median(d[:, k] ** 2)
+        if not np.isfinite(dk2):        # the more distinct neighbors reach a far point
+            return float("nan"), False
     radius = float(np.sqrt(target_neighbors / k * dk2))
     # the area density extrapolated from k neighbors to the target, checked where it was
     if target_neighbors > k:
         radius = _grown_to_target(tree, probe, radius, target_neighbors)
-    if patch:
-        radius = _local_patch(radius, 0.5 * radius,
-                              _ball_flatness(tree, p, 4 * int(math.ceil(target_neighbors))))
-    return radius
+    if not patch:
+        return radius, False
+    start = radius
+    radius = _local_patch(radius, 0.5 * radius,
+                          _ball_flatness(tree, p, 4 * int(math.ceil(target_neighbors))))
+    return radius, radius < start
 
 
 def _points_per_position(distances):

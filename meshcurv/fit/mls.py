@@ -88,19 +88,22 @@ def _potential(points, normals, point_weights, nbr, lo, hi, own, x0, x1, x2, h2)
 
 
 @njit(cache=True)
-def _curvature_one(points, normals, point_weights, nbr, lo, hi, own, x, nq, h, hess, out):
+def _curvature_one(points, normals, point_weights, nbr, lo, hi, own, x, nq, h, hess, g, out):
     """``out[:]`` = (k1, k2, d1 (3), d2 (3), n (3)) at x (see :func:`mls_curvature`);
-    False (``out`` untouched) where F or its derivatives are undefined."""
+    False (``out`` untouched) where F or its derivatives are undefined. ``hess`` (3, 3) and
+    ``g`` (3,) are scratch."""
     h2 = h * h
     s = STEP * h
-    f0 = _potential(points, normals, point_weights, nbr, lo, hi, own, x[0], x[1], x[2], h2)
-    g = np.empty(3)
+    x0, x1, x2 = x[0], x[1], x[2]
+    f0 = _potential(points, normals, point_weights, nbr, lo, hi, own, x0, x1, x2, h2)
     for i in range(3):
-        y = x.copy()
-        y[i] += s
-        fp = _potential(points, normals, point_weights, nbr, lo, hi, own, y[0], y[1], y[2], h2)
-        y[i] = x[i] - s
-        fm = _potential(points, normals, point_weights, nbr, lo, hi, own, y[0], y[1], y[2], h2)
+        e0 = s if i == 0 else 0.0
+        e1 = s if i == 1 else 0.0
+        e2 = s if i == 2 else 0.0
+        fp = _potential(points, normals, point_weights, nbr, lo, hi, own, x0 + e0, x1 + e1,
+                        x2 + e2, h2)
+        fm = _potential(points, normals, point_weights, nbr, lo, hi, own, x0 - e0, x1 - e1,
+                        x2 - e2, h2)
         g[i] = (fp - fm) / (2.0 * s)
         hess[i, i] = (fp - 2.0 * f0 + fm) / (s * s)
     for i in range(3):
@@ -108,45 +111,56 @@ def _curvature_one(points, normals, point_weights, nbr, lo, hi, own, x, nq, h, h
             acc = 0.0
             for si, sj, sign in ((1.0, 1.0, 1.0), (-1.0, -1.0, 1.0), (1.0, -1.0, -1.0),
                                  (-1.0, 1.0, -1.0)):
-                y = x.copy()
-                y[i] += si * s
-                y[j] += sj * s
+                # the step along axis i and along axis j (never the same axis: j > i)
+                y0 = x0 + (si * s if i == 0 else 0.0)
+                y1 = x1 + (si * s if i == 1 else (sj * s if j == 1 else 0.0))
+                y2 = x2 + (sj * s if j == 2 else 0.0)
                 acc += sign * _potential(points, normals, point_weights, nbr, lo, hi, own,
-                                         y[0], y[1], y[2], h2)
+                                         y0, y1, y2, h2)
             hess[i, j] = acc / (4.0 * s * s)
             hess[j, i] = hess[i, j]
     length = math.sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
     if not (np.isfinite(length) and length > 0.0 and np.isfinite(hess.sum())):
         return False
     sign = 1.0 if g[0] * nq[0] + g[1] * nq[1] + g[2] * nq[2] >= 0.0 else -1.0
-    n = g * (sign / length)
-    t1 = np.zeros(3)
-    t1[0 if abs(n[0]) < 0.9 else 1] = 1.0
-    t1 -= (t1[0] * n[0] + t1[1] * n[1] + t1[2] * n[2]) * n
-    t1 /= math.sqrt(t1[0] * t1[0] + t1[1] * t1[1] + t1[2] * t1[2])
-    t2 = np.array([n[1] * t1[2] - n[2] * t1[1], n[2] * t1[0] - n[0] * t1[2],
-                   n[0] * t1[1] - n[1] * t1[0]])
+    n0, n1, n2 = g[0] * (sign / length), g[1] * (sign / length), g[2] * (sign / length)
+    # t1: the axis x (y where the normal is near x) made orthogonal to n; t2 = n x t1
+    a0, a1 = (1.0, 0.0) if abs(n0) < 0.9 else (0.0, 1.0)
+    dot = a0 * n0 + a1 * n1
+    t10, t11, t12 = a0 - dot * n0, a1 - dot * n1, -dot * n2
+    tl = math.sqrt(t10 * t10 + t11 * t11 + t12 * t12)
+    t10, t11, t12 = t10 / tl, t11 / tl, t12 / tl
+    t20, t21, t22 = n1 * t12 - n2 * t11, n2 * t10 - n0 * t12, n0 * t11 - n1 * t10
     scale = sign / length
     s11 = s12 = s22 = 0.0
     for a in range(3):
+        ta = t10 if a == 0 else (t11 if a == 1 else t12)
+        ua = t20 if a == 0 else (t21 if a == 1 else t22)
         for b in range(3):
-            s11 += t1[a] * hess[a, b] * t1[b]
-            s12 += t1[a] * hess[a, b] * t2[b]
-            s22 += t2[a] * hess[a, b] * t2[b]
+            tb = t10 if b == 0 else (t11 if b == 1 else t12)
+            ub = t20 if b == 0 else (t21 if b == 1 else t22)
+            s11 += ta * hess[a, b] * tb
+            s12 += ta * hess[a, b] * ub
+            s22 += ua * hess[a, b] * ub
     s11 *= scale
     s12 *= scale
     s22 *= scale
     half_trace = 0.5 * (s11 + s22)
     disc = math.hypot(0.5 * (s11 - s22), s12)
     theta = 0.5 * math.atan2(2.0 * s12, s11 - s22)
-    d1 = math.cos(theta) * t1 + math.sin(theta) * t2
+    c, sn = math.cos(theta), math.sin(theta)
+    d0, d1, d2 = c * t10 + sn * t20, c * t11 + sn * t21, c * t12 + sn * t22
     out[0] = half_trace + disc
     out[1] = half_trace - disc
-    out[2:5] = d1
-    out[5] = n[1] * d1[2] - n[2] * d1[1]
-    out[6] = n[2] * d1[0] - n[0] * d1[2]
-    out[7] = n[0] * d1[1] - n[1] * d1[0]
-    out[8:11] = n
+    out[2] = d0
+    out[3] = d1
+    out[4] = d2
+    out[5] = n1 * d2 - n2 * d1
+    out[6] = n2 * d0 - n0 * d2
+    out[7] = n0 * d1 - n1 * d0
+    out[8] = n0
+    out[9] = n1
+    out[10] = n2
     return True
 
 
@@ -177,6 +191,7 @@ def mls_curvature(points, normals, query_points, query_normals, query_rows, indp
     nchunks = (m + CHUNK - 1) // CHUNK
     for c in prange(nchunks):
         hess = np.empty((3, 3))
+        g = np.empty(3)
         row = np.empty(11)
         x = np.empty(3)
         nq = np.empty(3)
@@ -187,7 +202,7 @@ def mls_curvature(points, normals, query_points, query_normals, query_rows, indp
             ok = (np.isfinite(x[0] + x[1] + x[2]) and support[q] > 0.0
                   and _curvature_one(points, normals, point_weights, indices, indptr[q],
                                      indptr[q + 1], query_rows[q], x, nq, support[q], hess,
-                                     row))
+                                     g, row))
             k1[q] = row[0] if ok else np.nan
             k2[q] = row[1] if ok else np.nan
             for a in range(3):

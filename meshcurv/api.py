@@ -1,7 +1,8 @@
 """The estimator's public entry points: :func:`principal_curvatures` and
 :func:`estimate_normals`. Input checks, the radius policy (default, "auto" = per-vertex scale,
 power-of-two rescaling of extreme scales) and options; the work itself is
-:func:`meshcurv.pipeline.run` (and :mod:`meshcurv.scale` for "auto").
+:func:`meshcurv.pipeline.run` (:mod:`meshcurv.scale` for "auto", :mod:`meshcurv.coarse` for inputs
+coarse for their shape).
 """
 
 import numpy as np
@@ -129,8 +130,8 @@ def no_estimate_reason(result, n_points, option="radius"):
 
 def _resolve_radius(radius, v, f, details=False):
     """The radius in model units: given, or the default from the sampling (None); with
-    ``details``, ``(radius, coarse)``: whether the default was made smaller for a mesh coarse
-    for its shape (:func:`meshcurv.neighbors.default_radius`)."""
+    ``details``, ``(radius, coarse)``: whether the default was made smaller for an input
+    coarse for its shape (:func:`meshcurv.neighbors.default_radius`)."""
     finite_rows = np.isfinite(v).all(axis=1)
     n_finite = int(finite_rows.sum())
     coarse = False
@@ -291,7 +292,7 @@ def _estimate(v, f, given_normals, radius, query, plan, progress):
 
 
 def _coarse_estimate(v, f, given_normals, radius, query, plan, progress):
-    """The estimate of a mesh coarse for its shape at its default ``radius``: the circle fits
+    """The estimate of an input coarse for its shape at its default ``radius``: the circle fits
     (:func:`meshcurv.pipeline.run`) blended with the MLS curvature of the same vertices
     (:func:`meshcurv.coarse.estimate`)."""
     def circle_fits(rows):

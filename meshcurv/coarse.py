@@ -88,15 +88,17 @@ PASSES = 2
 
 
 def estimate(v, f, radius, query, circle_fits, use_kring=True):
-    """The curvature of a mesh or cloud coarse for its shape: the circle fits' result blended with
-    :data:`PASSES` MLS passes (:func:`mls_rows`), rows ``query`` (all: None) in its order.
+    """The curvature of a mesh or cloud coarse for its shape: the circle fits' result blended
+    with :data:`PASSES` MLS passes (:func:`mls_rows`), rows ``query`` (all: None) in its
+    order.
 
     ``circle_fits(rows)`` returns the circle fits' :class:`meshcurv.CurvatureResult` at the
     vertex indices ``rows`` (None: all) at ``radius``; with ``query`` they also run where
     the queries' supports reach, and those rows' MLS passes where the next pass's supports
     do, so that every row is the whole input's. Supports are searched over the mesh's k-rings
-    (``use_kring``) or in balls (clouds: ``f`` None). The MLS fits run on coordinates scaled by the power of two
-    that keeps the radius's square finite (the same curvatures at any scale).
+    (``use_kring``) or in balls (clouds: ``f`` None). The MLS fits run on coordinates scaled
+    by the power of two that keeps the radius's square finite (the same curvatures at any
+    scale).
     """
     unit = power_of_two_scale(radius)
     with np.errstate(over="ignore"):

@@ -13,7 +13,8 @@ and with exact normals alike. The MLS surface through the same vertices and the 
 normals (support :func:`support`) gives 0.0068, 0.0027, 0.0057 and 0.019 there on its own.
 
 It is more sensitive to position noise, so the two are blended row by row by the noise the
-local jet measured: ``g = 1 / (1 + (noise / (NOISE_SCALE radius))^4)`` of the MLS estimate.
+local jet measured: ``g = 1 / (1 + (noise / (NOISE_SCALE radius))^4)`` of the MLS estimate
+(:func:`meshcurv.pipeline.clean_fraction`).
 Shape alone gives noise / radius 0.002-0.006 on those clean tori; Gaussian noise along the
 normal of 0.1 % of the diagonal 0.012-0.017, of 0.3 % 0.034-0.044. Mean |dk|, the four tori
 in the order above (measured once with a script; :data:`PASSES` MLS passes):
@@ -50,7 +51,7 @@ from .fit.mls import STEP, mls_curvature
 from .fit.outliers import outlier_weight
 from .neighbors import power_of_two_scale
 from .neighbors.radius import _longest_edges
-from .pipeline import ball_search, kring_search
+from .pipeline import BLOCK, ball_search, clean_fraction, kring_search
 from .weld import expand_rows
 
 __all__ = ["estimate", "support", "mls_rows", "SUPPORT_EDGES", "CLOUD_RING", "SUPPORT_CAP",
@@ -121,7 +122,6 @@ def estimate(v, f, radius, query, circle_fits, use_kring=True):
     for rows in wanted[1:]:
         part = base if query is None else expand_rows(base, np.searchsorted(wanted[0], rows))
         fields = mls_rows(part, rows, vs, normals, weights, h[rows], search, unit)
-        normals = normals.copy()
         normals[rows] = fields["normals"]
     return replace(part, **fields)
 
@@ -155,7 +155,7 @@ def support(v, f, radius):
     return np.where(used, h, radius)
 
 
-def mls_rows(result, rows, v, normals, point_weights, h, search, unit=1.0, block=16384):
+def mls_rows(result, rows, v, normals, point_weights, h, search, unit=1.0, block=BLOCK):
     """The MLS estimate of the rows ``rows`` of ``result`` (vertex indices, (m,)), blended
     into a copy of its fields (k1, k2, d1, d2, normals) by the row's noise (module docstring).
 
@@ -177,11 +177,10 @@ def mls_rows(result, rows, v, normals, point_weights, h, search, unit=1.0, block
         indptr, indices = search(idx)
         mls_curvature(v, normals, v[idx], result.normals[sl], idx, indptr, indices, h[sl],
                       point_weights, (k1[sl], k2[sl], d1[sl], d2[sl], n[sl]))
-    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-        g = 1.0 / (1.0 + (np.asarray(result.noise) / (NOISE_SCALE * result.radius)) ** 4)
+    g = clean_fraction(result.noise, NOISE_SCALE * result.radius)
     with np.errstate(over="ignore"):
         k1, k2 = k1 * unit, k2 * unit
-    use = np.asarray(result.valid) & np.isfinite(k1) & np.isfinite(k2) & np.isfinite(g)
+    use = np.asarray(result.valid) & np.isfinite(k1) & np.isfinite(k2)
     g = np.where(use, g, 0.0)
     out = {"k1": g * np.where(use, k1, 0.0) + (1.0 - g) * result.k1,
            "k2": g * np.where(use, k2, 0.0) + (1.0 - g) * result.k2}

@@ -124,7 +124,8 @@ def _curvature_one(points, normals, point_weights, nbr, lo, hi, own, x, nq, h, h
         return False
     sign = 1.0 if g[0] * nq[0] + g[1] * nq[1] + g[2] * nq[2] >= 0.0 else -1.0
     n0, n1, n2 = g[0] * (sign / length), g[1] * (sign / length), g[2] * (sign / length)
-    # t1: the axis x (y where the normal is near x) made orthogonal to n; t2 = n x t1
+    # the shape operator as meshcurv.surfaces.implicit_curvature forms it (the spec's): t1 the
+    # axis x (y where the normal is near x) made orthogonal to n, t2 = n x t1
     a0, a1 = (1.0, 0.0) if abs(n0) < 0.9 else (0.0, 1.0)
     dot = a0 * n0 + a1 * n1
     t10, t11, t12 = a0 - dot * n0, a1 - dot * n1, -dot * n2

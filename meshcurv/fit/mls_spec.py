@@ -3,6 +3,7 @@ oriented algebraic sphere fitted about a point, and the curvature of its zero se
 
 import numpy as np
 
+from ..surfaces import implicit_curvature
 from .mls import STEP
 
 __all__ = ["potential", "mls_curvature_at"]
@@ -43,7 +44,8 @@ def mls_curvature_at(x, normal, points, normals, support, point_weights=None):
 
     Returns ``(k1, k2, d1, d2, n)``: curvatures (1 / model units, k1 >= k2, convex positive
     about ``n``), unit directions and the unit normal grad F / |grad F| turned to ``normal``'s
-    side; NaNs where F is undefined at a stencil point.
+    side (:func:`meshcurv.surfaces.implicit_curvature`, whose directions are NaN at
+    umbilics); NaNs where F is undefined at a stencil point.
     """
     x = np.asarray(x, dtype=np.float64)
     step = STEP * support
@@ -65,15 +67,5 @@ def mls_curvature_at(x, normal, points, normals, support, point_weights=None):
         return np.nan, np.nan, nan, nan, nan
     if grad @ np.asarray(normal, dtype=np.float64) < 0:
         grad, hess = -grad, -hess
-    length = np.linalg.norm(grad)
-    n = grad / length
-    axis = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    t1 = axis - (axis @ n) * n
-    t1 /= np.linalg.norm(t1)
-    t2 = np.cross(n, t1)
-    s11, s12, s22 = (t1 @ hess @ t1) / length, (t1 @ hess @ t2) / length, \
-        (t2 @ hess @ t2) / length
-    half_trace, disc = 0.5 * (s11 + s22), np.hypot(0.5 * (s11 - s22), s12)
-    theta = 0.5 * np.arctan2(2 * s12, s11 - s22)
-    d1 = np.cos(theta) * t1 + np.sin(theta) * t2
-    return half_trace + disc, half_trace - disc, d1, np.cross(n, d1), n
+    n, k1, k2, d1, d2 = implicit_curvature(grad, hess)
+    return k1[0], k2[0], d1[0], d2[0], n[0]

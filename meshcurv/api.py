@@ -285,19 +285,20 @@ def _estimate(v, f, given_normals, radius, query, plan, progress):
         return scale_select.run_auto(v, f, given_normals, r0, query,
                                      plan._replace(wide_field=False), progress, radii=radii,
                                      run_radii=_run_radii)
+    default = radius is None
     radius, coarse = _resolve_radius(radius, v, f, details=True)
-    if coarse and plan.coarse_mls:
-        return _coarse_estimate(v, f, given_normals, radius, query, plan, progress)
+    if default and plan.coarse_mls and np.isfinite(radius):
+        return _default_estimate(v, f, given_normals, radius, query, plan, progress, coarse)
     return _run_one(v, f, given_normals, radius, query, plan, progress)
 
 
-def _coarse_estimate(v, f, given_normals, radius, query, plan, progress):
-    """The estimate of an input coarse for its shape at its default ``radius``: the circle fits
-    (:func:`meshcurv.pipeline.run`) blended with the MLS curvature of the same vertices
-    (:func:`meshcurv.coarse.estimate`)."""
+def _default_estimate(v, f, given_normals, radius, query, plan, progress, coarse):
+    """The estimate at the default ``radius``: the circle fits (:func:`meshcurv.pipeline.run`),
+    blended with the MLS curvature of the same vertices where the input is ``coarse`` for its
+    shape or the circle fits are limited by its sampling (:func:`meshcurv.coarse.estimate`)."""
     def circle_fits(rows):
         return _run_one(v, f, given_normals, radius, rows, plan, progress)
-    return coarse_mls.estimate(v, f, radius, query, circle_fits, plan.use_kring)
+    return coarse_mls.estimate(v, f, radius, query, circle_fits, plan.use_kring, coarse)
 
 
 def _run_radii(v, f, given_normals, radii, query, plan, progress):

@@ -39,6 +39,10 @@ The same tori as clouds of their vertices (the circle fits with the cloud's own 
 0.076, 0.019, 0.031, 0.081 -> 0.041, 0.013, 0.025, 0.060, with 0.3 % 0.0630, 0.026, 0.047,
 0.105 -> 0.0634, 0.026, 0.046, 0.104.
 
+Inputs not coarse for their shape whose circle fits are limited by a regular sampling all
+the same (tori of 96 x 24 vertices and more: 4-15x) are told apart by a probe of a few rows
+(:func:`sampling_limited`) and get the same blend; the others keep the circle fits.
+
 Used where the radius is the default (``Options.coarse_fit``).
 """
 
@@ -51,11 +55,12 @@ from .fit.mls import STEP, mls_curvature
 from .fit.outliers import outlier_weight
 from .neighbors import power_of_two_scale
 from .neighbors.radius import _longest_edges
-from .pipeline import BLOCK, ball_search, clean_fraction, kring_search
+from .pipeline import BLOCK, _sample_queries, ball_search, clean_fraction, kring_search
 from .weld import expand_rows
 
-__all__ = ["estimate", "support", "mls_rows", "SUPPORT_EDGES", "CLOUD_RING", "SUPPORT_CAP",
-           "NOISE_SCALE", "PASSES"]
+__all__ = ["estimate", "sampling_limited", "support", "mls_rows", "SUPPORT_EDGES",
+           "CLOUD_RING", "SUPPORT_CAP", "NOISE_SCALE", "PASSES", "PROBE_ROWS", "PROBE_SCALE",
+           "DISAGREEMENT_RATIO"]
 
 # The MLS support h of a vertex reaches this many times its longest edge: its whole 1-ring
 # then weighs at least (1 - 1/4)^4 = 0.32 in the weights (1 - d^2 / h^2)^4, which fall to 0.01
@@ -87,43 +92,105 @@ NOISE_SCALE = 0.015
 # 0.0019, 0.0045, 0.020 (a third pass: 0.0050, 0.0017, 0.0042, 0.021).
 PASSES = 2
 
+# Inputs not coarse for their shape: rows probed (spread over the vertex order) to tell whether
+# the circle fits are limited by the sampling (:func:`sampling_limited`); the larger support
+# over the smaller one (the MLS bias then doubles); the median disagreement over the MLS
+# estimate's own change above which the MLS surface is used. Measured ratios (probe of 256
+# rows, meshes and their clouds; mean |dk| circle fits -> MLS blend):
+#
+# - circle fits more accurate: icospheres, UV spheres and random spheres 0.6-0.8; ellipsoids
+#   (icosphere, UV 128 x 64 and 256 x 128, random) 0.5-1.9, the UV 256 x 128 mesh 0.00009 ->
+#   0.00041 at 1.86; monkey saddle and paraboloid, regular and random 0.8-1.5; CNC clouds
+#   0.7-1.4; every noisy input (0.05-0.3 % of the diagonal, CNC sigma_eps 0.1-0.2) 1.3-2.0,
+#   the trimesh torus 1 / 0.3 128 x 32 cloud at 0.05 % 0.0278 -> 0.0328 at 2.03;
+# - MLS surface more accurate: tori of 96 x 24 to 360 x 60 vertices, trimesh's and
+#   meshcurv.surfaces', 2.8-8.4 (0.0006-0.040 -> 0.00005-0.0069); the 120 x 30 torus at
+#   0.05 % noise 2.35 / 2.54 (0.0226 -> 0.0168); a 64 x 40 cylinder 2.2 (0.0001 -> 0.00002).
+#
+# 2.5 keeps the circle fits on every input where they were better, and on the two marginal
+# ones above it.
+PROBE_ROWS = 256
+PROBE_SCALE = float(np.sqrt(2.0))
+DISAGREEMENT_RATIO = 2.5
 
-def estimate(v, f, radius, query, circle_fits, use_kring=True):
-    """The curvature of a mesh or cloud coarse for its shape: the circle fits' result blended
-    with :data:`PASSES` MLS passes (:func:`mls_rows`), rows ``query`` (all: None) in its
-    order.
+
+def estimate(v, f, radius, query, circle_fits, use_kring=True, coarse=True):
+    """The curvature at the default ``radius`` of a mesh or cloud (rows ``query``, all: None,
+    in its order): the circle fits' result blended with :data:`PASSES` MLS passes
+    (:func:`mls_rows`) where the input is ``coarse`` for its shape, or where a probe of
+    :data:`PROBE_ROWS` rows finds the circle fits limited by the sampling
+    (:func:`sampling_limited`); the circle fits alone otherwise.
 
     ``circle_fits(rows)`` returns the circle fits' :class:`meshcurv.CurvatureResult` at the
-    vertex indices ``rows`` (None: all) at ``radius``; with ``query`` they also run where
-    the queries' supports reach, and those rows' MLS passes where the next pass's supports
-    do, so that every row is the whole input's. Supports are searched over the mesh's k-rings
-    (``use_kring``) or in balls (clouds: ``f`` None). The MLS fits run on coordinates scaled
-    by the power of two that keeps the radius's square finite (the same curvatures at any
-    scale).
+    vertex indices ``rows`` at ``radius``; with ``query`` they also run at the
+    probe's rows and where the queries' supports reach, and those rows' MLS passes where the
+    next pass's supports do, so that every row is the whole input's. Supports are searched
+    over the mesh's k-rings (``use_kring``) or in balls (clouds: ``f`` None). The MLS fits run
+    on coordinates scaled by the power of two that keeps the radius's square finite (the same
+    curvatures at any scale).
     """
     unit = power_of_two_scale(radius)
     with np.errstate(over="ignore"):
         vs = v * unit if unit != 1.0 else v
     h = support(vs, f, radius * unit)
-    reach = float(h.max()) * (1.0 + 2.0 * STEP)
+    n = len(v)
+    # the probe also fits at PROBE_SCALE supports
+    reach = float(h.max()) * (1.0 if coarse else PROBE_SCALE) * (1.0 + 2.0 * STEP)
     search = _lists(kring_search(vs, f, reach) if use_kring else
                     ball_search(vs, np.flatnonzero(np.isfinite(vs).all(axis=1)), reach))
-    n = len(v)
+    if query is not None and len(query) == n and np.array_equal(query, np.arange(n)):
+        query = None
     # rows of the circle fits, then of each pass; the last pass's are the queries
     wanted = [np.arange(n) if query is None else np.asarray(query)]
     for _ in range(PASSES):
         wanted.insert(0, wanted[0] if query is None else
                       np.union1d(wanted[0], search(wanted[0])[1]))
-    base = circle_fits(None if query is None else wanted[0])
+    probe = None if coarse else _sample_queries(n, PROBE_ROWS)
+    if probe is not None and query is not None:
+        wanted[0] = np.union1d(wanted[0], np.union1d(probe, search(probe)[1]))
+    base = circle_fits(wanted[0])
     normals = np.full((n, 3), np.nan)
     normals[wanted[0]] = base.normals
     weights = np.ones(n)
     weights[wanted[0]] = outlier_weight(base.outlier_score)
+    if probe is not None:
+        at = probe if query is None else np.searchsorted(wanted[0], probe)
+        if not sampling_limited(expand_rows(base, at), probe, vs, normals, weights, h[probe],
+                                search, unit):
+            return base if query is None else \
+                expand_rows(base, np.searchsorted(wanted[0], wanted[-1]))
     for rows in wanted[1:]:
         part = base if query is None else expand_rows(base, np.searchsorted(wanted[0], rows))
         fields = mls_rows(part, rows, vs, normals, weights, h[rows], search, unit)
         normals[rows] = fields["normals"]
     return replace(part, **fields)
+
+
+def sampling_limited(result, rows, v, normals, point_weights, h, search, unit=1.0):
+    """Whether the circle fits' ``result`` at the vertex indices ``rows`` (m,) is limited by
+    the sampling rather than by the shape: whether the median over the rows of their
+    difference from the MLS surface's curvature at supports ``h`` exceeds
+    :data:`DISAGREEMENT_RATIO` times the median change of the MLS curvature from ``h`` to
+    ``PROBE_SCALE h`` (one pass on the circle fits' ``normals``; arguments as
+    :func:`mls_rows`).
+
+    The MLS estimate's bias grows like h^2, so its change over the two supports measures its
+    own error; where the circle fits are right, their difference from it is that error and
+    the ratio stays near 1 (position noise alone: 1.3-1.5); where they carry the error of a
+    regular grid sampled at a few points per half-set (tori), the difference is that error
+    and the ratio is 2.8-8 (measurements at :data:`DISAGREEMENT_RATIO`). False where either
+    median is 0 or NaN.
+    """
+    k1, k2 = _mls_curvatures(rows, v, normals, result.normals, h, search, point_weights,
+                             unit)[:2]
+    w1, w2 = _mls_curvatures(rows, v, normals, result.normals, PROBE_SCALE * h, search,
+                             point_weights, unit)[:2]
+    ok = np.asarray(result.valid) & np.isfinite(k1 + k2 + w1 + w2)
+    if not ok.any():
+        return False
+    apart = np.median(np.abs(result.k1 - k1)[ok] + np.abs(result.k2 - k2)[ok])
+    change = np.median(np.abs(w1 - k1)[ok] + np.abs(w2 - k2)[ok])
+    return bool(change > 0.0 and apart > DISAGREEMENT_RATIO * change)
 
 
 def _lists(search):
@@ -168,18 +235,9 @@ def mls_rows(result, rows, v, normals, point_weights, h, search, unit=1.0, block
     vertex within ``h (1 + 2 STEP)``. Rows ``result`` has no estimate for, and rows whose MLS
     fit fails, keep the circle fits'.
     """
-    m = len(rows)
-    k1, k2 = np.empty(m), np.empty(m)
-    d1, d2, n = np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 3))
-    for lo in range(0, m, block):
-        sl = slice(lo, min(m, lo + block))
-        idx = rows[sl]
-        indptr, indices = search(idx)
-        mls_curvature(v, normals, v[idx], result.normals[sl], idx, indptr, indices, h[sl],
-                      point_weights, (k1[sl], k2[sl], d1[sl], d2[sl], n[sl]))
+    k1, k2, d1, d2, n = _mls_curvatures(rows, v, normals, result.normals, h, search,
+                                        point_weights, unit, block)
     g = clean_fraction(result.noise, NOISE_SCALE * result.radius)
-    with np.errstate(over="ignore"):
-        k1, k2 = k1 * unit, k2 * unit
     use = np.asarray(result.valid) & np.isfinite(k1) & np.isfinite(k2)
     g = np.where(use, g, 0.0)
     out = {"k1": g * np.where(use, k1, 0.0) + (1.0 - g) * result.k1,
@@ -190,3 +248,21 @@ def mls_rows(result, rows, v, normals, point_weights, h, search, unit=1.0, block
     out["d2"] = np.where(mls_side, d2, result.d2)
     out["normals"] = np.where(mls_side, n, result.normals)
     return out
+
+
+def _mls_curvatures(rows, v, normals, row_normals, h, search, point_weights, unit=1.0,
+                    block=BLOCK):
+    """The MLS surface's (k1, k2, d1, d2, normals) at the vertex indices ``rows`` (m,),
+    curvatures in the units of ``v / unit``, NaN where the fit fails; ``row_normals`` (m, 3)
+    set the sign (arguments as :func:`mls_rows`)."""
+    m = len(rows)
+    k1, k2 = np.empty(m), np.empty(m)
+    d1, d2, n = np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 3))
+    for lo in range(0, m, block):
+        sl = slice(lo, min(m, lo + block))
+        idx = rows[sl]
+        indptr, indices = search(idx)
+        mls_curvature(v, normals, v[idx], row_normals[sl], idx, indptr, indices, h[sl],
+                      point_weights, (k1[sl], k2[sl], d1[sl], d2[sl], n[sl]))
+    with np.errstate(over="ignore"):
+        return k1 * unit, k2 * unit, d1, d2, n

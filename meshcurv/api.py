@@ -1,8 +1,9 @@
 """The estimator's public entry points: :func:`principal_curvatures` and
 :func:`estimate_normals`. Input checks, the radius policy (default, "auto" = per-vertex scale,
 power-of-two rescaling of extreme scales) and options; the work itself is
-:func:`meshcurv.pipeline.run` (:mod:`meshcurv.scale` for "auto", :mod:`meshcurv.coarse` for inputs
-coarse for their shape).
+:func:`meshcurv.pipeline.run` (:mod:`meshcurv.scale` for "auto"), blended with the MLS surface's
+curvature by :mod:`meshcurv.coarse` where the input is coarse for its shape or its circle fits
+are limited by its sampling.
 """
 
 import numpy as np
@@ -276,7 +277,10 @@ def _estimate(v, f, given_normals, radius, query, plan, progress):
     """The curvature at the vertex indices ``query`` for a radius, a list of radii or
     "auto" (see :func:`principal_curvatures`), on inputs already checked."""
     if _is_radius_list(radius):
-        return _run_radii(v, f, given_normals, _check_radii(radius), query, plan, progress)
+        radii = _check_radii(radius)
+        if plan.coarse_mls and len(v):
+            return _blended(v, f, given_normals, radii, query, plan, progress, coarse=False)
+        return _run_radii(v, f, given_normals, radii, query, plan, progress)
     if isinstance(radius, str) and radius == "auto":
         r0 = _resolve_radius(None, v, f)
         radii = _auto_ladder(v, f, r0) if np.isfinite(r0) else [r0]
@@ -285,20 +289,20 @@ def _estimate(v, f, given_normals, radius, query, plan, progress):
         return scale_select.run_auto(v, f, given_normals, r0, query,
                                      plan._replace(wide_field=False), progress, radii=radii,
                                      run_radii=_run_radii)
-    default = radius is None
     radius, coarse = _resolve_radius(radius, v, f, details=True)
-    if default and plan.coarse_mls and np.isfinite(radius):
-        return _default_estimate(v, f, given_normals, radius, query, plan, progress, coarse)
+    if plan.coarse_mls and len(v) and np.isfinite(radius):
+        return _blended(v, f, given_normals, [radius], query, plan, progress, coarse)[0]
     return _run_one(v, f, given_normals, radius, query, plan, progress)
 
 
-def _default_estimate(v, f, given_normals, radius, query, plan, progress, coarse):
-    """The estimate at the default ``radius``: the circle fits (:func:`meshcurv.pipeline.run`),
-    blended with the MLS curvature of the same vertices where the input is ``coarse`` for its
-    shape or the circle fits are limited by its sampling (:func:`meshcurv.coarse.estimate`)."""
+def _blended(v, f, given_normals, radii, query, plan, progress, coarse):
+    """The circle fits at each of ``radii`` (:func:`_run_radii`), blended with the MLS
+    curvature of the same vertices where the input is ``coarse`` for its shape (at its
+    default radius) or the circle fits are limited by its sampling
+    (:func:`meshcurv.coarse.estimate`); a list of results."""
     def circle_fits(rows):
-        return _run_one(v, f, given_normals, radius, rows, plan, progress)
-    return coarse_mls.estimate(v, f, radius, query, circle_fits, plan.use_kring, coarse)
+        return _run_radii(v, f, given_normals, radii, rows, plan, progress)
+    return coarse_mls.estimate(v, f, radii, query, circle_fits, plan.use_kring, coarse)
 
 
 def _run_radii(v, f, given_normals, radii, query, plan, progress):

@@ -41,9 +41,11 @@ The same tori as clouds of their vertices (the circle fits with the cloud's own 
 
 Inputs not coarse for their shape whose circle fits are limited by a regular sampling all
 the same (tori of 96 x 24 vertices and more: 4-15x) are told apart by a probe of a few rows
-(:func:`sampling_limited`) and get the same blend; the others keep the circle fits.
+(:func:`sampling_limited`) and get the same blend; the others keep the circle fits. The probe
+runs at the default radius, at a given one and at each of a list of radii.
 
-Used where the radius is the default (``Options.coarse_fit``).
+Used by :func:`meshcurv.principal_curvatures` unless ``Options.coarse_fit`` is "circles" or
+the radius is "auto".
 """
 
 from dataclasses import replace
@@ -114,56 +116,109 @@ PROBE_SCALE = float(np.sqrt(2.0))
 DISAGREEMENT_RATIO = 2.5
 
 
-def estimate(v, f, radius, query, circle_fits, use_kring=True, coarse=True):
-    """The curvature at the default ``radius`` of a mesh or cloud (rows ``query``, all: None,
-    in its order): the circle fits' result blended with :data:`PASSES` MLS passes
-    (:func:`mls_rows`) where the input is ``coarse`` for its shape, or where a probe of
-    :data:`PROBE_ROWS` rows finds the circle fits limited by the sampling
-    (:func:`sampling_limited`); the circle fits alone otherwise.
+def estimate(v, f, radii, query, circle_fits, use_kring=True, coarse=True):
+    """The curvature of a mesh or cloud at each radius of the list ``radii`` (a list of
+    results, rows ``query``, all: None, in its order): the circle fits' result blended with
+    :data:`PASSES` MLS passes (:func:`mls_rows`) where the input is ``coarse`` for its shape
+    (at its default radius), or where a probe of :data:`PROBE_ROWS` rows finds the circle
+    fits limited by the sampling (:func:`sampling_limited`); the circle fits alone otherwise.
 
-    ``circle_fits(rows)`` returns the circle fits' :class:`meshcurv.CurvatureResult` at the
-    vertex indices ``rows`` at ``radius``; with ``query`` they also run at the
-    probe's rows and where the queries' supports reach, and those rows' MLS passes where the
-    next pass's supports do, so that every row is the whole input's. Supports are searched
-    over the mesh's k-rings (``use_kring``) or in balls (clouds: ``f`` None). The MLS fits run
-    on coordinates scaled by the power of two that keeps the radius's square finite (the same
+    ``circle_fits(rows)`` returns the circle fits' list of :class:`meshcurv.CurvatureResult`
+    (one per radius) at the vertex indices ``rows``; with ``query`` they run first at the
+    probe's rows and where their supports reach, then at the queries and, for the radii
+    blended, where the queries' supports reach and those rows' MLS passes where the next
+    pass's supports do, so that every row is the whole input's. Supports are searched over
+    the mesh's k-rings (``use_kring``) or in balls (clouds: ``f`` None). The MLS fits run on
+    coordinates scaled by the power of two that keeps the radius's square finite (the same
     curvatures at any scale).
     """
+    n = len(v)
+    whole = query is None or (len(query) == n and np.array_equal(query, np.arange(n)))
+    # the probe also fits at PROBE_SCALE supports
+    scales = [_supports(v, f, r, 1.0 if coarse else PROBE_SCALE, use_kring) for r in radii]
+    probe = _sample_queries(n, PROBE_ROWS)
+    if whole:
+        fitted = np.arange(n)
+        bases = circle_fits(fitted)
+        blended = [coarse or _limited(base, fitted, probe, *scale)
+                   for base, scale in zip(bases, scales)]
+        chains = [[fitted] * (1 + PASSES * blend) for blend in blended]
+    else:
+        query = np.asarray(query)
+        blended = [True] * len(radii)
+        if not coarse:
+            near = np.unique(np.concatenate([probe] + [search(probe)[1]
+                                                       for *_, search in scales]))
+            blended = [_limited(base, near, probe, *scale)
+                       for base, scale in zip(circle_fits(near), scales)]
+        chains = [_chain(search, query) if blend else [query]
+                  for blend, (*_, search) in zip(blended, scales)]
+        fitted = np.unique(np.concatenate([chain[0] for chain in chains]))
+        bases = circle_fits(fitted)
+    return [_passes(base, fitted, chain, *scale)
+            for base, chain, scale in zip(bases, chains, scales)]
+
+
+def _supports(v, f, radius, wide, use_kring):
+    """``(unit, v * unit, h, search)`` at ``radius``: the power of two that keeps its square
+    finite, the scaled points, their supports (:func:`support`) and the lists reaching
+    ``wide`` supports."""
     unit = power_of_two_scale(radius)
     with np.errstate(over="ignore"):
         vs = v * unit if unit != 1.0 else v
     h = support(vs, f, radius * unit)
-    n = len(v)
-    # the probe also fits at PROBE_SCALE supports
-    reach = float(h.max()) * (1.0 if coarse else PROBE_SCALE) * (1.0 + 2.0 * STEP)
-    search = _lists(kring_search(vs, f, reach) if use_kring else
-                    ball_search(vs, np.flatnonzero(np.isfinite(vs).all(axis=1)), reach))
-    if query is not None and len(query) == n and np.array_equal(query, np.arange(n)):
-        query = None
-    # rows of the circle fits, then of each pass; the last pass's are the queries
-    wanted = [np.arange(n) if query is None else np.asarray(query)]
+    reach = float(h.max()) * wide * (1.0 + 2.0 * STEP)
+    return unit, vs, h, _lists(kring_search(vs, f, reach) if use_kring else
+                               ball_search(vs, np.flatnonzero(np.isfinite(vs).all(axis=1)),
+                                           reach))
+
+
+def _chain(search, query):
+    """The rows of the circle fits, then of each of the :data:`PASSES` passes, the last the
+    ``query``."""
+    wanted = [query]
     for _ in range(PASSES):
-        wanted.insert(0, wanted[0] if query is None else
-                      np.union1d(wanted[0], search(wanted[0])[1]))
-    probe = None if coarse else _sample_queries(n, PROBE_ROWS)
-    if probe is not None and query is not None:
-        wanted[0] = np.union1d(wanted[0], np.union1d(probe, search(probe)[1]))
-    base = circle_fits(wanted[0])
+        wanted.insert(0, np.union1d(wanted[0], search(wanted[0])[1]))
+    return wanted
+
+
+def _rows(result, fitted, rows):
+    """The rows ``rows`` of ``result``, whose rows are the vertex indices ``fitted``
+    (ascending)."""
+    return result if len(rows) == len(fitted) and rows is fitted else \
+        expand_rows(result, np.searchsorted(fitted, rows))
+
+
+def _field(result, fitted, n):
+    """The circle fits' normals (n, 3) and outlier weights (n,) at the rows ``fitted`` of
+    ``result``; NaN normals and weight 1 elsewhere."""
     normals = np.full((n, 3), np.nan)
-    normals[wanted[0]] = base.normals
+    normals[fitted] = result.normals
     weights = np.ones(n)
-    weights[wanted[0]] = outlier_weight(base.outlier_score)
-    if probe is not None:
-        at = probe if query is None else np.searchsorted(wanted[0], probe)
-        if not sampling_limited(expand_rows(base, at), probe, vs, normals, weights, h[probe],
-                                search, unit):
-            return base if query is None else \
-                expand_rows(base, np.searchsorted(wanted[0], wanted[-1]))
-    for rows in wanted[1:]:
-        part = base if query is None else expand_rows(base, np.searchsorted(wanted[0], rows))
-        fields = mls_rows(part, rows, vs, normals, weights, h[rows], search, unit)
+    weights[fitted] = outlier_weight(result.outlier_score)
+    return normals, weights
+
+
+def _limited(base, fitted, probe, unit, v, h, search):
+    """:func:`sampling_limited` at the rows ``probe`` of the circle fits' ``base`` (rows
+    ``fitted``, ascending)."""
+    normals, weights = _field(base, fitted, len(v))
+    return sampling_limited(_rows(base, fitted, probe), probe, v, normals, weights, h[probe],
+                            search, unit)
+
+
+def _passes(base, fitted, chain, unit, v, h, search):
+    """The circle fits' result ``base`` at the rows ``fitted`` (ascending) blended with an
+    MLS pass over the rows of each of ``chain[1:]`` (:func:`_chain`; none: ``base``); at the
+    rows ``chain[-1]``."""
+    normals, weights = _field(base, fitted, len(v))
+    result = _rows(base, fitted, chain[-1])
+    for rows in chain[1:]:
+        part = _rows(base, fitted, rows)
+        fields = mls_rows(part, rows, v, normals, weights, h[rows], search, unit)
         normals[rows] = fields["normals"]
-    return replace(part, **fields)
+        result = replace(part, **fields)
+    return result
 
 
 def sampling_limited(result, rows, v, normals, point_weights, h, search, unit=1.0):

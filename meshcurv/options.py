@@ -261,12 +261,12 @@ class Options:
         fits' normals (:mod:`meshcurv.coarse`; trimesh tori of 16-32 vertices around the
         tube: mean |dk| 0.0019-0.018 instead of 0.022-0.069 on the meshes, 0.0025-0.018
         instead of 0.019-0.068 on their points alone); the normals, d1 and d2 of those rows are
-        the MLS surface's. Other inputs at their default radius get the same blend where a
-        probe of 256 rows finds the circle fits limited by a regular sampling
-        (:func:`meshcurv.coarse.sampling_limited`: tori of 96 x 24 to 360 x 60 vertices,
-        mean |dk| 4-15x smaller); elsewhere they keep the circle fits' bits. "circles": the
-        circle fits alone. A given radius, a list of radii and "auto" always use the circle
-        fits alone.
+        the MLS surface's. Other inputs, at their default radius, a given radius or each of
+        a list of radii, get the same blend where a probe of 256 rows finds the circle fits
+        limited by a regular sampling (:func:`meshcurv.coarse.sampling_limited`: tori of
+        96 x 24 to 360 x 60 vertices, mean |dk| 4-15x smaller); elsewhere they keep the
+        circle fits' bits. "circles": the circle fits alone. ``radius="auto"`` always uses
+        the circle fits alone.
 
     Examples
     --------

@@ -52,9 +52,14 @@ def _cases():
     coarse = trimesh.creation.torus(1.0, 0.3, major_sections=64, minor_sections=16)
     pc = meshcurv.principal_curvatures
     return {
+        # the circle fits alone (coarse_fit="circles"), and blended with the MLS surface where
+        # the probe finds them limited by the torus's regular sampling
         "torus_kring_given_normals": lambda: pc(torus.vertices, torus.faces, torus.normals,
-                                                radius=0.3),
-        "torus_kring_estimated_normals": lambda: pc(torus.vertices, torus.faces, radius=0.3),
+                                                radius=0.3, coarse_fit="circles"),
+        "torus_kring_estimated_normals": lambda: pc(torus.vertices, torus.faces, radius=0.3,
+                                                    coarse_fit="circles"),
+        "torus_kring_estimated_normals_mls": lambda: pc(torus.vertices, torus.faces,
+                                                        radius=0.3),
         "torus_ball_default_radius": lambda: pc(torus.vertices, torus.faces,
                                                 neighborhood="ball", coarse_fit="circles"),
         "torus_ball_default_radius_mls": lambda: pc(torus.vertices, torus.faces,
@@ -65,7 +70,7 @@ def _cases():
         "noisy_sphere_cloud_viewpoint": lambda: pc(cloud, radius=0.3, orientation=(0, 0, 5)),
         "paraboloid_options": lambda: pc(para.vertices, para.faces, para.normals, radius=1.0,
                                          n_directions=6, weighting="none", robust=False,
-                                         section_blend=False),
+                                         section_blend=False, coarse_fit="circles"),
         "paraboloid_cloud_query": lambda: pc(para.vertices, radius=1.0, weighting="distance",
                                              query=np.arange(0, len(para.vertices), 7)),
         # coarse for its shape at the default radius: circle fits blended with MLS curvature

@@ -25,10 +25,17 @@ def test_a_list_of_radii_gives_each_radius_as_its_own_call(with_faces):
         np.testing.assert_array_equal(res.valid, one.valid)
         np.testing.assert_array_equal(res.status, one.status)
         # the same points within each ball; a cloud's lists come from another grid, which only
-        # changes the order of the sums (rounding)
-        for name in ("k1", "k2", "d1", "d2", "normals", "noise"):
-            np.testing.assert_allclose(getattr(res, name), getattr(one, name), rtol=1e-9,
-                                       atol=1e-11, err_msg=name)
+        # changes the order of the sums (rounding, ~1e-12), which the MLS surface's central
+        # differences (this torus's regular sampling takes them) scale by 1 / STEP^2 = 1e8,
+        # relative to the largest curvature (2); there a principal direction's sign may flip
+        # where the frame's first axis is a principal direction
+        rtol, atol = (1e-9, 1e-11) if with_faces else (1e-7, 1e-7)
+        for name in ("k1", "k2", "normals", "noise"):
+            np.testing.assert_allclose(getattr(res, name), getattr(one, name), rtol=rtol,
+                                       atol=atol, err_msg=name)
+        for name in ("d1", "d2"):
+            cosine = np.abs(np.einsum("ij,ij->i", getattr(res, name), getattr(one, name)))
+            np.testing.assert_allclose(cosine, 1.0, rtol=0, atol=atol, err_msg=name)
 
 
 @pytest.mark.parametrize("radius", [[], ["a"], [0.3, -1.0], [0.3, np.nan]])

@@ -20,8 +20,10 @@ FIELDS = ("k1", "k2", "d1", "d2", "normals", "valid", "n_neighbors", "n_samples"
 
 def untiled_run(*args, **kwargs):
     """The untiled estimate a tiled run reproduces: at the one radius its halo covers (tiles
-    do not retry sparse points at larger radii)."""
-    return meshcurv.principal_curvatures(*args, sparse_retry=False, **kwargs)
+    do not retry sparse points at larger radii, nor blend in the MLS surface's wider
+    supports)."""
+    return meshcurv.principal_curvatures(*args, sparse_retry=False, coarse_fit="circles",
+                                         **kwargs)
 
 
 def on(client):

@@ -21,9 +21,9 @@ Pipeline, every stage resumable from a work folder (``OUT.meshcurv-work`` next t
    driver then decides one flip per tile so that tiles agree in their overlaps (below);
 3. curvature: one task per tile loads its pieces (tile + halo only) and the tile's normals,
    estimates at its own points (at the radius the halo covers: ``sparse_retry`` is off, points
-   with too few neighbors are not re-estimated at larger radii) and writes the results per
-   input chunk
-   (``results/t_IX_IY/cNNNNNN.npz``) and then a ``done.json`` marker;
+   with too few neighbors are not re-estimated at larger radii, and ``coarse_fit`` is
+   "circles", the MLS blend's wider supports are not taken) and writes the results per input
+   chunk (``results/t_IX_IY/cNNNNNN.npz``) and then a ``done.json`` marker;
 4. write: the driver streams the input once more and writes the output in input order, through
    a temporary file renamed at the end (never a partial output). The work folder is removed
    unless ``keep_work`` is set.

@@ -365,7 +365,8 @@ def principal_curvatures_tiled(vertices, radius, tile_size, normals=None, *, ori
     The driver cuts the cloud into tile + halo pieces in a work folder (which workers must see);
     each task loads one tile + halo only. With given normals, ``orientation="+z"`` or a
     viewpoint the result equals ``principal_curvatures(vertices, normals=..., radius=radius,
-    orientation=...)`` bit for bit (module docstring).
+    orientation=..., sparse_retry=False, coarse_fit="circles")`` bit for bit (module
+    docstring).
 
     Parameters
     ----------
@@ -448,6 +449,9 @@ def _check_estimator_options(orientation, options):
     if options.get("sparse_retry", False):
         raise ValueError("tiled runs estimate at the one radius their halo covers: "
                          "sparse_retry must be False")
+    if options.get("coarse_fit", "circles") != "circles":
+        raise ValueError("tiled runs estimate at the one radius their halo covers: "
+                         "coarse_fit must be 'circles'")
     return orientation if isinstance(orientation, str) else tuple(map(float, orientation))
 
 

@@ -191,10 +191,12 @@ def curvature_task(name, work, chunk_ids, radius, orientation, options, in_path,
                 # these normals were estimated: treat them as the estimator treats its own
                 if options.get("refine_normals") is None:
                     options = dict(options, refine_normals=True)
-            # the halo covers ``radius`` only: no retries at larger radii
+            # the halo covers ``radius`` only: no retries at larger radii, no MLS blend (its
+            # supports reach further)
             res = principal_curvatures(xyz, normals=normals, radius=radius,
                                        orientation=orientation, query=np.flatnonzero(own),
-                                       **dict(options, sparse_retry=False))
+                                       **dict(options, sparse_retry=False,
+                                              coarse_fit="circles"))
             rows = result_rows(res)
             out = os.path.join(work, "results", name)
             os.makedirs(out, exist_ok=True)

@@ -282,13 +282,22 @@ def _estimate(v, f, given_normals, radius, query, plan, progress):
             return _blended(v, f, given_normals, radii, query, plan, progress, coarse=False)
         return _run_radii(v, f, given_normals, radii, query, plan, progress)
     if isinstance(radius, str) and radius == "auto":
-        r0 = _resolve_radius(None, v, f)
+        r0, coarse = _resolve_radius(None, v, f, details=True)
         radii = _auto_ladder(v, f, r0) if np.isfinite(r0) else [r0]
-        # the ladder widens the balls where the noise asks for it: the normal field stays at
-        # each radius (see Plan.wide_field)
-        return scale_select.run_auto(v, f, given_normals, r0, query,
-                                     plan._replace(wide_field=False), progress, radii=radii,
-                                     run_radii=_run_radii)
+
+        def per_vertex_scale(rows):
+            # the ladder widens the balls where the noise asks for it: the normal field stays
+            # at each radius (see Plan.wide_field)
+            return [scale_select.run_auto(v, f, given_normals, r0, rows,
+                                          plan._replace(wide_field=False), progress,
+                                          radii=radii, run_radii=_run_radii)]
+        if plan.coarse_mls and len(v) and np.isfinite(r0):
+            # the probe judges the default radius's fits: "auto" blends where the default does
+            def default_radius(rows):
+                return _run_radii(v, f, given_normals, [r0], rows, plan, progress)
+            return coarse_mls.estimate(v, f, [r0], query, per_vertex_scale, plan.use_kring,
+                                       coarse, probe_fits=default_radius)[0]
+        return per_vertex_scale(query)[0]
     radius, coarse = _resolve_radius(radius, v, f, details=True)
     if plan.coarse_mls and len(v) and np.isfinite(radius):
         return _blended(v, f, given_normals, [radius], query, plan, progress, coarse)[0]

@@ -42,10 +42,10 @@ The same tori as clouds of their vertices (the circle fits with the cloud's own 
 Inputs not coarse for their shape whose circle fits are limited by a regular sampling all
 the same (tori of 96 x 24 vertices and more: 4-15x) are told apart by a probe of a few rows
 (:func:`sampling_limited`) and get the same blend; the others keep the circle fits. The probe
-runs at the default radius, at a given one and at each of a list of radii.
+runs at the default radius, at a given one and at each of a list of radii; with
+``radius="auto"`` it judges the default radius's fits and blends the per-vertex scale's.
 
-Used by :func:`meshcurv.principal_curvatures` unless ``Options.coarse_fit`` is "circles" or
-the radius is "auto".
+Used by :func:`meshcurv.principal_curvatures` unless ``Options.coarse_fit`` is "circles".
 """
 
 from dataclasses import replace
@@ -116,7 +116,7 @@ PROBE_SCALE = float(np.sqrt(2.0))
 DISAGREEMENT_RATIO = 2.5
 
 
-def estimate(v, f, radii, query, circle_fits, use_kring=True, coarse=True):
+def estimate(v, f, radii, query, circle_fits, use_kring=True, coarse=True, probe_fits=None):
     """The curvature of a mesh or cloud at each radius of the list ``radii`` (a list of
     results, rows ``query``, all: None, in its order): the circle fits' result blended with
     :data:`PASSES` MLS passes (:func:`mls_rows`) where the input is ``coarse`` for its shape
@@ -124,33 +124,34 @@ def estimate(v, f, radii, query, circle_fits, use_kring=True, coarse=True):
     fits limited by the sampling (:func:`sampling_limited`); the circle fits alone otherwise.
 
     ``circle_fits(rows)`` returns the circle fits' list of :class:`meshcurv.CurvatureResult`
-    (one per radius) at the vertex indices ``rows``; with ``query`` they run first at the
-    probe's rows and where their supports reach, then at the queries and, for the radii
-    blended, where the queries' supports reach and those rows' MLS passes where the next
-    pass's supports do, so that every row is the whole input's. Supports are searched over
-    the mesh's k-rings (``use_kring``) or in balls (clouds: ``f`` None). The MLS fits run on
-    coordinates scaled by the power of two that keeps the radius's square finite (the same
-    curvatures at any scale).
+    (one per radius) at the vertex indices ``rows``; ``probe_fits(rows)``, the same, the fits
+    the probe judges (default: ``circle_fits``; "auto" passes the default radius's). With
+    ``query`` the probe's fits run at the probe's rows and where their supports reach, then
+    the circle fits at the queries and, for the radii blended, where the queries' supports
+    reach and those rows' MLS passes where the next pass's supports do, so that every row is
+    the whole input's. Supports are searched over the mesh's k-rings (``use_kring``) or in
+    balls (clouds: ``f`` None). The MLS fits run on coordinates scaled by the power of two
+    that keeps the radius's square finite (the same curvatures at any scale).
     """
     n = len(v)
     whole = query is None or (len(query) == n and np.array_equal(query, np.arange(n)))
     # the probe also fits at PROBE_SCALE supports
     scales = [_supports(v, f, r, 1.0 if coarse else PROBE_SCALE, use_kring) for r in radii]
     probe = _sample_queries(n, PROBE_ROWS)
+    blended = [True] * len(radii) if coarse else None
+    if blended is None and not (whole and probe_fits is None):
+        near = np.unique(np.concatenate([probe] + [search(probe)[1] for *_, search in scales]))
+        blended = [_limited(base, near, probe, *scale)
+                   for base, scale in zip((probe_fits or circle_fits)(near), scales)]
     if whole:
         fitted = np.arange(n)
         bases = circle_fits(fitted)
-        blended = [coarse or _limited(base, fitted, probe, *scale)
-                   for base, scale in zip(bases, scales)]
+        if blended is None:
+            blended = [_limited(base, fitted, probe, *scale)
+                       for base, scale in zip(bases, scales)]
         chains = [[fitted] * (1 + PASSES * blend) for blend in blended]
     else:
         query = np.asarray(query)
-        blended = [True] * len(radii)
-        if not coarse:
-            near = np.unique(np.concatenate([probe] + [search(probe)[1]
-                                                       for *_, search in scales]))
-            blended = [_limited(base, near, probe, *scale)
-                       for base, scale in zip(circle_fits(near), scales)]
         chains = [_chain(search, query) if blend else [query]
                   for blend, (*_, search) in zip(blended, scales)]
         fitted = np.unique(np.concatenate([chain[0] for chain in chains]))

@@ -265,8 +265,8 @@ class Options:
         a list of radii, get the same blend where a probe of 256 rows finds the circle fits
         limited by a regular sampling (:func:`meshcurv.coarse.sampling_limited`: tori of
         96 x 24 to 360 x 60 vertices, mean |dk| 4-15x smaller); elsewhere they keep the
-        circle fits' bits. "circles": the circle fits alone. ``radius="auto"`` always uses
-        the circle fits alone.
+        circle fits' bits; ``radius="auto"`` is blended where its default radius is.
+        "circles": the circle fits alone.
 
     Examples
     --------

@@ -76,6 +76,8 @@ def _cases():
         # coarse for its shape at the default radius: circle fits blended with MLS curvature
         "coarse_torus_mls": lambda: pc(coarse.vertices, coarse.faces),
         "coarse_torus_cloud_mls": lambda: pc(coarse.vertices),
+        # per-vertex scale, blended where the default radius's fits are
+        "coarse_torus_auto_mls": lambda: pc(coarse.vertices, coarse.faces, radius="auto"),
     }
 
 

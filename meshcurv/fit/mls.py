@@ -35,11 +35,12 @@ STEP = 1e-4
 
 
 @njit(cache=True)
-def _potential(points, normals, point_weights, nbr, lo, hi, own, x0, x1, x2, h2):
-    """F at (x0, x1, x2): the oriented sphere fitted to the points ``own`` (a row of
-    ``points``, or -1 for none) and ``nbr[lo:hi]`` (entries equal to ``own`` skipped), NaN
-    where the weights vanish or the fit is singular."""
-    sw = sp0 = sp1 = sp2 = sn0 = sn1 = sn2 = sa = sb = 0.0
+def _gather(points, normals, point_weights, nbr, lo, hi, own, x, reach2, pts, nrm, pw):
+    """The points ``own`` (a row of ``points``, or -1 for none) and ``nbr[lo:hi]`` (entries
+    equal to ``own`` skipped), in that order, that can weigh in a fit about x: within
+    ``sqrt(reach2)`` of it, with a finite normal and a positive point weight; copied to
+    ``pts``, ``nrm`` and ``pw`` (weight 1 without ``point_weights``). Returns their count."""
+    k = 0
     for e in range(lo - 1, hi):
         if e < lo:
             j = own
@@ -49,22 +50,45 @@ def _potential(points, normals, point_weights, nbr, lo, hi, own, x0, x1, x2, h2)
             j = nbr[e]
             if j == own:
                 continue
-        q0 = points[j, 0] - x0
-        q1 = points[j, 1] - x1
-        q2 = points[j, 2] - x2
+        q0 = points[j, 0] - x[0]
+        q1 = points[j, 1] - x[1]
+        q2 = points[j, 2] - x[2]
+        if not q0 * q0 + q1 * q1 + q2 * q2 < reach2:
+            continue
+        if not np.isfinite(normals[j, 0] + normals[j, 1] + normals[j, 2]):
+            continue
+        weight = 1.0 if point_weights is None else point_weights[j]
+        if not weight > 0.0:
+            continue
+        for a in range(3):
+            pts[k, a] = points[j, a]
+            nrm[k, a] = normals[j, a]
+        pw[k] = weight
+        k += 1
+    return k
+
+
+@njit(cache=True)
+def _potential(pts, nrm, pw, k, weighted, x0, x1, x2, h2):
+    """F at (x0, x1, x2): the oriented sphere fitted to the ``k`` points ``pts`` with normals
+    ``nrm`` (times the point weights ``pw`` where ``weighted``), NaN where the weights vanish
+    or the fit is singular."""
+    sw = sp0 = sp1 = sp2 = sn0 = sn1 = sn2 = sa = sb = 0.0
+    for e in range(k):
+        q0 = pts[e, 0] - x0
+        q1 = pts[e, 1] - x1
+        q2 = pts[e, 2] - x2
         qq = q0 * q0 + q1 * q1 + q2 * q2
         r = 1.0 - qq / h2
         if not r > 0.0:
             continue
-        n0 = normals[j, 0]
-        n1 = normals[j, 1]
-        n2 = normals[j, 2]
-        if not np.isfinite(n0 + n1 + n2):
-            continue
+        n0 = nrm[e, 0]
+        n1 = nrm[e, 1]
+        n2 = nrm[e, 2]
         w = r * r
         w = w * w
-        if point_weights is not None:
-            w *= point_weights[j]
+        if weighted:
+            w *= pw[e]
             if not w > 0.0:
                 continue
         sw += w
@@ -88,21 +112,21 @@ def _potential(points, normals, point_weights, nbr, lo, hi, own, x0, x1, x2, h2)
 
 
 @njit(cache=True)
-def _curvature_one(points, normals, point_weights, nbr, lo, hi, own, x, nq, h, hess, g, out):
-    """``out[:]`` = (k1, k2, d1 (3), d2 (3), n (3)) at x (see :func:`mls_curvature`);
-    False (``out`` untouched) where F or its derivatives are undefined. ``hess`` (3, 3) and
-    ``g`` (3,) are scratch."""
+def _curvature_one(pts, nrm, pw, k, weighted, x, nq, h, hess, g, out):
+    """``out[:]`` = (k1, k2, d1 (3), d2 (3), n (3)) at x from the ``k`` points of
+    :func:`_gather` (see :func:`mls_curvature`); False (``out`` untouched) where F or its
+    derivatives are undefined. ``hess`` (3, 3) and ``g`` (3,) are scratch."""
     h2 = h * h
     s = STEP * h
     x0, x1, x2 = x[0], x[1], x[2]
-    f0 = _potential(points, normals, point_weights, nbr, lo, hi, own, x0, x1, x2, h2)
+    f0 = _potential(pts, nrm, pw, k, weighted, x0, x1, x2, h2)
     for i in range(3):
         e0 = s if i == 0 else 0.0
         e1 = s if i == 1 else 0.0
         e2 = s if i == 2 else 0.0
-        fp = _potential(points, normals, point_weights, nbr, lo, hi, own, x0 + e0, x1 + e1,
+        fp = _potential(pts, nrm, pw, k, weighted, x0 + e0, x1 + e1,
                         x2 + e2, h2)
-        fm = _potential(points, normals, point_weights, nbr, lo, hi, own, x0 - e0, x1 - e1,
+        fm = _potential(pts, nrm, pw, k, weighted, x0 - e0, x1 - e1,
                         x2 - e2, h2)
         g[i] = (fp - fm) / (2.0 * s)
         hess[i, i] = (fp - 2.0 * f0 + fm) / (s * s)
@@ -115,8 +139,7 @@ def _curvature_one(points, normals, point_weights, nbr, lo, hi, own, x, nq, h, h
                 y0 = x0 + (si * s if i == 0 else 0.0)
                 y1 = x1 + (si * s if i == 1 else (sj * s if j == 1 else 0.0))
                 y2 = x2 + (sj * s if j == 2 else 0.0)
-                acc += sign * _potential(points, normals, point_weights, nbr, lo, hi, own,
-                                         y0, y1, y2, h2)
+                acc += sign * _potential(pts, nrm, pw, k, weighted, y0, y1, y2, h2)
             hess[i, j] = acc / (4.0 * s * s)
             hess[j, i] = hess[i, j]
     length = math.sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
@@ -189,6 +212,10 @@ def mls_curvature(points, normals, query_points, query_normals, query_rows, indp
     """
     k1, k2, d1, d2, nout = out
     m = query_points.shape[0]
+    most = 0
+    for q in range(m):
+        most = max(most, indptr[q + 1] - indptr[q])
+    weighted = point_weights is not None
     nchunks = (m + CHUNK - 1) // CHUNK
     for c in prange(nchunks):
         hess = np.empty((3, 3))
@@ -196,14 +223,22 @@ def mls_curvature(points, normals, query_points, query_normals, query_rows, indp
         row = np.empty(11)
         x = np.empty(3)
         nq = np.empty(3)
+        # the points of one query's fits, gathered once for its 19 evaluations
+        pts = np.empty((most + 1, 3))
+        nrm = np.empty((most + 1, 3))
+        pw = np.empty(most + 1)
         for q in range(c * CHUNK, min(m, (c + 1) * CHUNK)):
             for a in range(3):
                 x[a] = query_points[q, a]
                 nq[a] = query_normals[q, a]
-            ok = (np.isfinite(x[0] + x[1] + x[2]) and support[q] > 0.0
-                  and _curvature_one(points, normals, point_weights, indices, indptr[q],
-                                     indptr[q + 1], query_rows[q], x, nq, support[q], hess,
-                                     g, row))
+            h = support[q]
+            ok = np.isfinite(x[0] + x[1] + x[2]) and h > 0.0
+            if ok:
+                # every stencil point lies within sqrt 2 STEP h of x
+                reach = h * (1.0 + 4.0 * STEP)
+                k = _gather(points, normals, point_weights, indices, indptr[q], indptr[q + 1],
+                            query_rows[q], x, reach * reach, pts, nrm, pw)
+                ok = _curvature_one(pts, nrm, pw, k, weighted, x, nq, h, hess, g, row)
             k1[q] = row[0] if ok else np.nan
             k2[q] = row[1] if ok else np.nan
             for a in range(3):

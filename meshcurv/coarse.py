@@ -49,6 +49,8 @@ Used by :func:`meshcurv.principal_curvatures` unless ``Options.coarse_fit`` is "
 """
 
 from dataclasses import replace
+from functools import cache
+from typing import Callable, NamedTuple
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -135,43 +137,66 @@ def estimate(v, f, radii, query, circle_fits, use_kring=True, coarse=True, probe
     """
     n = len(v)
     whole = query is None or (len(query) == n and np.array_equal(query, np.arange(n)))
-    # the probe also fits at PROBE_SCALE supports
-    scales = [_supports(v, f, r, 1.0 if coarse else PROBE_SCALE, use_kring) for r in radii]
+    scales = [_supports(v, f, r, use_kring, probed=not coarse) for r in radii]
     probe = _sample_queries(n, PROBE_ROWS)
     blended = [True] * len(radii) if coarse else None
     if blended is None and not (whole and probe_fits is None):
-        near = np.unique(np.concatenate([probe] + [search(probe)[1] for *_, search in scales]))
-        blended = [_limited(base, near, probe, *scale)
+        near = np.unique(np.concatenate([probe] + [scale.probe_search(probe)[1]
+                                                   for scale in scales]))
+        blended = [_limited(base, near, probe, scale)
                    for base, scale in zip((probe_fits or circle_fits)(near), scales)]
     if whole:
         fitted = np.arange(n)
         bases = circle_fits(fitted)
         if blended is None:
-            blended = [_limited(base, fitted, probe, *scale)
+            blended = [_limited(base, fitted, probe, scale)
                        for base, scale in zip(bases, scales)]
         chains = [[fitted] * (1 + PASSES * blend) for blend in blended]
     else:
         query = np.asarray(query)
-        chains = [_chain(search, query) if blend else [query]
-                  for blend, (*_, search) in zip(blended, scales)]
+        chains = [_chain(scale.search, query) if blend else [query]
+                  for blend, scale in zip(blended, scales)]
         fitted = np.unique(np.concatenate([chain[0] for chain in chains]))
         bases = circle_fits(fitted)
-    return [_passes(base, fitted, chain, *scale)
+    return [_passes(base, fitted, chain, scale)
             for base, chain, scale in zip(bases, chains, scales)]
 
 
-def _supports(v, f, radius, wide, use_kring):
-    """``(unit, v * unit, h, search)`` at ``radius``: the power of two that keeps its square
-    finite, the scaled points, their supports (:func:`support`) and the lists reaching
-    ``wide`` supports."""
+class _Scale(NamedTuple):
+    """The MLS fits at one radius: ``unit``, the power of two that keeps the radius's square
+    finite; ``v``, the points times it; ``h``, their supports (:func:`support`); ``search``
+    and ``probe_search``, lists (:func:`_lists`) reaching the largest support and
+    :data:`PROBE_SCALE` times it (the probe's wider fits)."""
+    unit: float
+    v: np.ndarray
+    h: np.ndarray
+    search: Callable
+    probe_search: Callable
+
+
+def _supports(v, f, radius, use_kring, probed):
+    """The :class:`_Scale` of ``radius``: lists over the mesh's k-rings (``use_kring``) or in
+    balls. The passes' lists reach the largest support, the probe's ``PROBE_SCALE`` times it;
+    but a ball search lists in the order of its grid, whose cells follow its reach, so where
+    the input is ``probed`` the passes read the probe's ball lists (the order of the sums the
+    golden outputs record)."""
     unit = power_of_two_scale(radius)
     with np.errstate(over="ignore"):
         vs = v * unit if unit != 1.0 else v
     h = support(vs, f, radius * unit)
-    reach = float(h.max()) * wide * (1.0 + 2.0 * STEP)
-    return unit, vs, h, _lists(kring_search(vs, f, reach) if use_kring else
-                               ball_search(vs, np.flatnonzero(np.isfinite(vs).all(axis=1)),
-                                           reach))
+    finite = None if use_kring else np.flatnonzero(np.isfinite(vs).all(axis=1))
+
+    def lists(wide):
+        # the search is built at its first use (the probe's is not where nothing is probed)
+        @cache
+        def search():
+            reach = float(h.max()) * wide * (1.0 + 2.0 * STEP)
+            return _lists(kring_search(vs, f, reach) if use_kring else
+                          ball_search(vs, finite, reach))
+        return lambda idx: search()(idx)
+    probe_search = lists(PROBE_SCALE)
+    return _Scale(unit, vs, h, probe_search if probed and not use_kring else lists(1.0),
+                  probe_search)
 
 
 def _chain(search, query):
@@ -200,23 +225,24 @@ def _field(result, fitted, n):
     return normals, weights
 
 
-def _limited(base, fitted, probe, unit, v, h, search):
+def _limited(base, fitted, probe, scale):
     """:func:`sampling_limited` at the rows ``probe`` of the circle fits' ``base`` (rows
-    ``fitted``, ascending)."""
-    normals, weights = _field(base, fitted, len(v))
-    return sampling_limited(_rows(base, fitted, probe), probe, v, normals, weights, h[probe],
-                            search, unit)
+    ``fitted``, ascending) at the :class:`_Scale` ``scale``."""
+    normals, weights = _field(base, fitted, len(scale.v))
+    return sampling_limited(_rows(base, fitted, probe), probe, scale.v, normals, weights,
+                            scale.h[probe], scale.probe_search, scale.unit)
 
 
-def _passes(base, fitted, chain, unit, v, h, search):
+def _passes(base, fitted, chain, scale):
     """The circle fits' result ``base`` at the rows ``fitted`` (ascending) blended with an
-    MLS pass over the rows of each of ``chain[1:]`` (:func:`_chain`; none: ``base``); at the
-    rows ``chain[-1]``."""
-    normals, weights = _field(base, fitted, len(v))
+    MLS pass over the rows of each of ``chain[1:]`` (:func:`_chain`; none: ``base``) at the
+    :class:`_Scale` ``scale``; at the rows ``chain[-1]``."""
+    normals, weights = _field(base, fitted, len(scale.v))
     result = _rows(base, fitted, chain[-1])
     for rows in chain[1:]:
         part = _rows(base, fitted, rows)
-        fields = mls_rows(part, rows, v, normals, weights, h[rows], search, unit)
+        fields = mls_rows(part, rows, scale.v, normals, weights, scale.h[rows], scale.search,
+                          scale.unit)
         normals[rows] = fields["normals"]
         result = replace(part, **fields)
     return result

@@ -5,8 +5,9 @@ kernel over query points with CSR neighbor lists (:func:`mls_curvature`).
 About each evaluation point y a sphere (or plane) ``u0 + u . z + u4 |z|^2`` is fitted to the
 neighbors' positions and unit normals with the weights ``(1 - |p - y|^2 / h^2)^4`` (h the
 support), in closed form; its value at y is the potential F(y), whose zero set is the surface.
-Its gradient and Hessian, by central differences over 19 evaluations at steps of
-``STEP * h`` about a point, give the normal and the shape operator
+Its gradient and Hessian, by central differences over 13 evaluations at steps of
+``STEP * h`` about a point (the mixed second derivatives from the diagonal steps
+``+-(e_i + e_j)`` and the axis steps), give the normal and the shape operator
 ``P Hess(F) P / |grad F|`` (P the tangent projector). Because the fit follows the evaluation
 point, F is a smooth surface of second order even where a single sphere could not describe
 the shape (a torus's saddle) and where a neighborhood holds few points per direction (a
@@ -112,10 +113,11 @@ def _potential(pts, nrm, pw, k, weighted, x0, x1, x2, h2):
 
 
 @njit(cache=True)
-def _curvature_one(pts, nrm, pw, k, weighted, x, nq, h, hess, g, out):
+def _curvature_one(pts, nrm, pw, k, weighted, x, nq, h, hess, g, ends, out):
     """``out[:]`` = (k1, k2, d1 (3), d2 (3), n (3)) at x from the ``k`` points of
     :func:`_gather` (see :func:`mls_curvature`); False (``out`` untouched) where F or its
-    derivatives are undefined. ``hess`` (3, 3) and ``g`` (3,) are scratch."""
+    derivatives are undefined. ``hess`` (3, 3), ``g`` (3,) and ``ends`` (2, 3) are
+    scratch."""
     h2 = h * h
     s = STEP * h
     x0, x1, x2 = x[0], x[1], x[2]
@@ -124,23 +126,20 @@ def _curvature_one(pts, nrm, pw, k, weighted, x, nq, h, hess, g, out):
         e0 = s if i == 0 else 0.0
         e1 = s if i == 1 else 0.0
         e2 = s if i == 2 else 0.0
-        fp = _potential(pts, nrm, pw, k, weighted, x0 + e0, x1 + e1,
-                        x2 + e2, h2)
-        fm = _potential(pts, nrm, pw, k, weighted, x0 - e0, x1 - e1,
-                        x2 - e2, h2)
-        g[i] = (fp - fm) / (2.0 * s)
-        hess[i, i] = (fp - 2.0 * f0 + fm) / (s * s)
+        ends[0, i] = _potential(pts, nrm, pw, k, weighted, x0 + e0, x1 + e1, x2 + e2, h2)
+        ends[1, i] = _potential(pts, nrm, pw, k, weighted, x0 - e0, x1 - e1, x2 - e2, h2)
+        g[i] = (ends[0, i] - ends[1, i]) / (2.0 * s)
+        hess[i, i] = (ends[0, i] - 2.0 * f0 + ends[1, i]) / (s * s)
     for i in range(3):
         for j in range(i + 1, 3):
-            acc = 0.0
-            for si, sj, sign in ((1.0, 1.0, 1.0), (-1.0, -1.0, 1.0), (1.0, -1.0, -1.0),
-                                 (-1.0, 1.0, -1.0)):
-                # the step along axis i and along axis j (never the same axis: j > i)
-                y0 = x0 + (si * s if i == 0 else 0.0)
-                y1 = x1 + (si * s if i == 1 else (sj * s if j == 1 else 0.0))
-                y2 = x2 + (sj * s if j == 2 else 0.0)
-                acc += sign * _potential(pts, nrm, pw, k, weighted, y0, y1, y2, h2)
-            hess[i, j] = acc / (4.0 * s * s)
+            # F at x +- (s e_i + s e_j) against the axis steps' (never the same axis: j > i)
+            y0 = s if i == 0 else 0.0
+            y1 = s if (i == 1 or j == 1) else 0.0
+            y2 = s if j == 2 else 0.0
+            both = (_potential(pts, nrm, pw, k, weighted, x0 + y0, x1 + y1, x2 + y2, h2)
+                    + _potential(pts, nrm, pw, k, weighted, x0 - y0, x1 - y1, x2 - y2, h2))
+            hess[i, j] = (both - ends[0, i] - ends[1, i] - ends[0, j] - ends[1, j]
+                          + 2.0 * f0) / (2.0 * s * s)
             hess[j, i] = hess[i, j]
     length = math.sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
     if not (np.isfinite(length) and length > 0.0 and np.isfinite(hess.sum())):
@@ -220,10 +219,11 @@ def mls_curvature(points, normals, query_points, query_normals, query_rows, indp
     for c in prange(nchunks):
         hess = np.empty((3, 3))
         g = np.empty(3)
+        ends = np.empty((2, 3))
         row = np.empty(11)
         x = np.empty(3)
         nq = np.empty(3)
-        # the points of one query's fits, gathered once for its 19 evaluations
+        # the points of one query's fits, gathered once for its 13 evaluations
         pts = np.empty((most + 1, 3))
         nrm = np.empty((most + 1, 3))
         pw = np.empty(most + 1)
@@ -238,7 +238,7 @@ def mls_curvature(points, normals, query_points, query_normals, query_rows, indp
                 reach = h * (1.0 + 4.0 * STEP)
                 k = _gather(points, normals, point_weights, indices, indptr[q], indptr[q + 1],
                             query_rows[q], x, reach * reach, pts, nrm, pw)
-                ok = _curvature_one(pts, nrm, pw, k, weighted, x, nq, h, hess, g, row)
+                ok = _curvature_one(pts, nrm, pw, k, weighted, x, nq, h, hess, g, ends, row)
             k1[q] = row[0] if ok else np.nan
             k2[q] = row[1] if ok else np.nan
             for a in range(3):

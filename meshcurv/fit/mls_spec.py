@@ -40,7 +40,8 @@ def potential(x, points, normals, support, point_weights=None):
 
 def mls_curvature_at(x, normal, points, normals, support, point_weights=None):
     """Curvature of the MLS surface F = 0 (:func:`potential`) at x, by central differences of
-    F with the step ``STEP * support``.
+    F with the step ``STEP * support`` (13 evaluations: x, the axis steps and the diagonal
+    steps ``+-(e_i + e_j)``).
 
     Returns ``(k1, k2, d1, d2, n)``: curvatures (1 / model units, k1 >= k2, convex positive
     about ``n``), unit directions and the unit normal grad F / |grad F| turned to ``normal``'s
@@ -55,13 +56,15 @@ def mls_curvature_at(x, normal, points, normals, support, point_weights=None):
         return potential(x + d, points, normals, support, point_weights)
 
     f0 = f(np.zeros(3))
-    grad = np.array([(f(e[i]) - f(-e[i])) / (2 * step) for i in range(3)])
+    ahead, behind = np.array([f(e[i]) for i in range(3)]), np.array([f(-e[i]) for i in range(3)])
+    grad = (ahead - behind) / (2 * step)
     hess = np.empty((3, 3))
     for i in range(3):
-        hess[i, i] = (f(e[i]) - 2 * f0 + f(-e[i])) / (step * step)
+        hess[i, i] = (ahead[i] - 2 * f0 + behind[i]) / (step * step)
         for j in range(i + 1, 3):
-            hess[i, j] = hess[j, i] = (f(e[i] + e[j]) + f(-e[i] - e[j]) - f(e[i] - e[j])
-                                       - f(e[j] - e[i])) / (4 * step * step)
+            # F along the diagonal less along the axes: (H_ii + 2 H_ij + H_jj) - H_ii - H_jj
+            hess[i, j] = hess[j, i] = (f(e[i] + e[j]) + f(-e[i] - e[j]) - ahead[i] - behind[i]
+                                       - ahead[j] - behind[j] + 2 * f0) / (2 * step * step)
     nan = np.full(3, np.nan)
     if not (np.isfinite(grad).all() and np.isfinite(hess).all()) or not grad.any():
         return np.nan, np.nan, nan, nan, nan

@@ -103,9 +103,9 @@ def test_las10_input_of_a_tiled_run_is_written_as_las12(las10, tmp_path, capsys)
                      "--viewpoint", *map(str, VIEWPOINT)]) == 0
     assert "will be LAS 1.2" in capsys.readouterr().err
     got = _assert_copy_of(path, out)
-    # tiles estimate at the one radius their halo covers (no sparse retries)
+    # tiles estimate at the one radius their halo covers (no sparse retries, no MLS blend)
     res = meshcurv.principal_curvatures(xyz, radius=2.0, orientation=VIEWPOINT,
-                                        sparse_retry=False)
+                                        sparse_retry=False, coarse_fit="circles")
     np.testing.assert_array_equal(np.asarray(got["k1"]), res.k1)
     assert sorted(os.listdir(tmp_path)) == ["out.las"]  # no work folder left
 
@@ -312,7 +312,8 @@ def test_tiled_run_of_a_quantized_georeferenced_cloud_equals_the_untiled_run_bit
     tiled = principal_curvatures_tiled(pts, radius, side / 4 * 1.0001, orientation=viewpoint,
                                        n_workers=2, threads_per_task=1)
     untiled = meshcurv.principal_curvatures(pts, radius=radius, orientation=viewpoint,
-                                            sparse_retry=False)    # as the tiles do
+                                            sparse_retry=False,    # as the tiles do
+                                            coarse_fit="circles")
     for name in ("k1", "k2", "d1", "d2", "normals", "valid", "n_neighbors", "n_samples",
                  "residual", "noise"):
         np.testing.assert_array_equal(getattr(tiled, name), getattr(untiled, name), err_msg=name)

@@ -381,6 +381,10 @@ def test_bad_arguments_are_refused_before_any_work(laz_input, tmp_path):
         annotate_tiled(path, out, radius, -1.0)
     with pytest.raises(ValueError, match="radius in model units"):
         annotate_tiled(path, out, "auto", 30.0)
+    with pytest.raises(ValueError, match="sparse_retry must be False"):
+        annotate_tiled(path, out, radius, 30.0, sparse_retry=True)
+    with pytest.raises(ValueError, match="coarse_fit must be 'circles'"):
+        annotate_tiled(path, out, radius, 30.0, coarse_fit="mls")
     with pytest.raises(ValueError, match="sets"):
         principal_curvatures_tiled(xyz, radius, 30.0, query=[0])
     assert os.listdir(tmp_path) == []

@@ -48,7 +48,6 @@ runs at the default radius, at a given one and at each of a list of radii; with
 Used by :func:`meshcurv.principal_curvatures` unless ``Options.coarse_fit`` is "circles".
 """
 
-from dataclasses import replace
 from functools import cache
 from typing import Callable, NamedTuple
 
@@ -238,14 +237,18 @@ def _passes(base, fitted, chain, scale):
     MLS pass over the rows of each of ``chain[1:]`` (:func:`_chain`; none: ``base``) at the
     :class:`_Scale` ``scale``; at the rows ``chain[-1]``."""
     normals, weights = _field(base, fitted, len(scale.v))
-    result = _rows(base, fitted, chain[-1])
-    for rows in chain[1:]:
+    part = _rows(base, fitted, chain[-1])
+    for i, rows in enumerate(chain[1:], start=2):
         part = _rows(base, fitted, rows)
-        fields = mls_rows(part, rows, scale.v, normals, weights, scale.h[rows], scale.search,
-                          scale.unit)
-        normals[rows] = fields["normals"]
-        result = replace(part, **fields)
-    return result
+        # the passes before the last give normals alone; the last blends into the arrays of
+        # ``part`` (rows copied from ``base``, or ``base`` itself, which no pass reads after)
+        last = i == len(chain)
+        out = {name: getattr(part, name) for name in BLENDED} if last else \
+            {"normals": np.empty((len(rows), 3))}
+        mls_rows(part, rows, scale.v, normals, weights, scale.h[rows], scale.search,
+                 scale.unit, out=out)
+        normals[rows] = out["normals"]
+    return part
 
 
 def sampling_limited(result, rows, v, normals, point_weights, h, search, unit=1.0):
@@ -304,9 +307,16 @@ def support(v, f, radius):
     return np.where(used, h, radius)
 
 
-def mls_rows(result, rows, v, normals, point_weights, h, search, unit=1.0, block=BLOCK):
+# The result's fields the MLS surface's estimate blends into.
+BLENDED = ("k1", "k2", "d1", "d2", "normals")
+
+
+def mls_rows(result, rows, v, normals, point_weights, h, search, unit=1.0, block=BLOCK,
+             out=None):
     """The MLS estimate of the rows ``rows`` of ``result`` (vertex indices, (m,)), blended
-    into a copy of its fields (k1, k2, d1, d2, normals) by the row's noise (module docstring).
+    into its fields (k1, k2, d1, d2, normals) by the row's noise (module docstring): a dict of
+    the blended fields, ``out`` (the arrays to write: all five fields, or "normals" alone;
+    they may be ``result``'s own) or new arrays.
 
     ``v`` (n, 3) and ``h`` are the vertices and supports in the result's units times ``unit``
     (a power of two that keeps squares finite; curvatures are scaled back by it).
@@ -317,18 +327,26 @@ def mls_rows(result, rows, v, normals, point_weights, h, search, unit=1.0, block
     vertex within ``h (1 + 2 STEP)``. Rows ``result`` has no estimate for, and rows whose MLS
     fit fails, keep the circle fits'.
     """
-    k1, k2, d1, d2, n = _mls_curvatures(rows, v, normals, result.normals, h, search,
-                                        point_weights, unit, block)
-    g = clean_fraction(result.noise, NOISE_SCALE * result.radius)
-    use = np.asarray(result.valid) & np.isfinite(k1) & np.isfinite(k2)
-    g = np.where(use, g, 0.0)
-    out = {"k1": g * np.where(use, k1, 0.0) + (1.0 - g) * result.k1,
-           "k2": g * np.where(use, k2, 0.0) + (1.0 - g) * result.k2}
-    # directions and normal: the larger share's
-    mls_side = (g >= 0.5)[:, None]
-    out["d1"] = np.where(mls_side, d1, result.d1)
-    out["d2"] = np.where(mls_side, d2, result.d2)
-    out["normals"] = np.where(mls_side, n, result.normals)
+    m = len(rows)
+    share = clean_fraction(result.noise, NOISE_SCALE * result.radius)
+    valid = np.asarray(result.valid)
+    if out is None:
+        out = {name: np.empty(np.shape(getattr(result, name))) for name in BLENDED}
+    # a block at a time: the MLS fields of one block alive at once
+    for lo in range(0, m, block):
+        sl = slice(lo, min(m, lo + block))
+        k1, k2, d1, d2, n = _mls_curvatures(rows[sl], v, normals, result.normals[sl], h[sl],
+                                            search, point_weights, unit, block)
+        use = valid[sl] & np.isfinite(k1) & np.isfinite(k2)
+        g = np.where(use, share[sl], 0.0)
+        # directions and normal: the larger share's
+        mls_side = (g >= 0.5)[:, None]
+        if "k1" in out:
+            out["k1"][sl] = g * np.where(use, k1, 0.0) + (1.0 - g) * result.k1[sl]
+            out["k2"][sl] = g * np.where(use, k2, 0.0) + (1.0 - g) * result.k2[sl]
+            out["d1"][sl] = np.where(mls_side, d1, result.d1[sl])
+            out["d2"][sl] = np.where(mls_side, d2, result.d2[sl])
+        out["normals"][sl] = np.where(mls_side, n, result.normals[sl])
     return out
 
 

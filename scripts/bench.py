@@ -376,14 +376,14 @@ def stage_times(v, f, normals, radius):
     """Where the time of a meshcurv call goes: seconds per compiled kernel, and the rest.
 
     Every public compiled kernel (meshcurv.neighbors, .normals, .fit) that no other kernel
-    calls is wrapped with a timer for the duration of one
-    call with the normals given and one with them estimated; the kernels are the leaves of the
-    pipeline (neighbour search, normals, orientation, circle fits), and what remains of the
-    call's time is numpy and Python glue. Returns ``{mode: {stage: seconds}}``.
+    calls is wrapped with a timer for the duration of one call with the normals given and one
+    with them estimated; the kernels are the leaves of the pipeline (neighbour search,
+    normals, orientation, circle fits, MLS surface), and what remains of the call's time is
+    numpy and Python glue. Returns ``{mode: {stage: seconds}}``.
     """
     import meshcurv
-    from meshcurv import pipeline
-    from meshcurv.fit import fused, jet, outliers
+    from meshcurv import coarse, pipeline
+    from meshcurv.fit import fused, jet, mls, outliers
     from meshcurv.neighbors import grid, kring
     from meshcurv.normals import orient, pca, sphere
 
@@ -391,16 +391,17 @@ def stage_times(v, f, normals, radius):
     # the kernels the pipeline calls from Python, by module; not those a kernel of the module
     # calls (its own or imported): numba binds them from the module's globals when it
     # compiles, where a Python wrapper does not compile
-    modules = (grid, kring, pca, sphere, orient, jet, outliers, fused)
+    modules = (grid, kring, pca, sphere, orient, jet, outliers, fused, mls)
     originals = {}
     for module in modules:
         kernels = {name: fn for name, fn in vars(module).items() if hasattr(fn, "py_func")}
         called = {name for fn in kernels.values() for name in fn.py_func.__code__.co_names}
         originals.update({(module, name): fn for name, fn in kernels.items()
                           if not name.startswith("_") and name not in called})
-    # and where the pipeline holds a kernel under its own name (from ... import name)
-    originals.update({(pipeline, name): fn for (_, name), fn in list(originals.items())
-                      if getattr(pipeline, name, None) is fn})
+    # and where the pipeline or the MLS blend holds a kernel under its own name (from ...
+    # import name)
+    originals.update({(holder, name): fn for (_, name), fn in list(originals.items())
+                      for holder in (pipeline, coarse) if getattr(holder, name, None) is fn})
 
     def timed(name, fn):
         def call(*args, **kwargs):

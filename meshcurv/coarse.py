@@ -210,8 +210,7 @@ def _chain(search, query):
 def _rows(result, fitted, rows):
     """The rows ``rows`` of ``result``, whose rows are the vertex indices ``fitted``
     (ascending)."""
-    return result if len(rows) == len(fitted) and rows is fitted else \
-        expand_rows(result, np.searchsorted(fitted, rows))
+    return result if rows is fitted else expand_rows(result, np.searchsorted(fitted, rows))
 
 
 def _field(result, fitted, n):

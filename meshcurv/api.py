@@ -278,7 +278,7 @@ def _estimate(v, f, given_normals, radius, query, plan, progress):
     "auto" (see :func:`principal_curvatures`), on inputs already checked."""
     if _is_radius_list(radius):
         radii = _check_radii(radius)
-        if plan.coarse_mls and len(v):
+        if plan.coarse_mls:
             return _blended(v, f, given_normals, radii, query, plan, progress, coarse=False)
         return _run_radii(v, f, given_normals, radii, query, plan, progress)
     if isinstance(radius, str) and radius == "auto":
@@ -291,7 +291,7 @@ def _estimate(v, f, given_normals, radius, query, plan, progress):
             return [scale_select.run_auto(v, f, given_normals, r0, rows,
                                           plan._replace(wide_field=False), progress,
                                           radii=radii, run_radii=_run_radii)]
-        if plan.coarse_mls and len(v) and np.isfinite(r0):
+        if plan.coarse_mls and np.isfinite(r0):
             # the probe judges the default radius's fits: "auto" blends where the default does
             def default_radius(rows):
                 return _run_radii(v, f, given_normals, [r0], rows, plan, progress)
@@ -299,7 +299,7 @@ def _estimate(v, f, given_normals, radius, query, plan, progress):
                                        coarse, probe_fits=default_radius)[0]
         return per_vertex_scale(query)[0]
     radius, coarse = _resolve_radius(radius, v, f, details=True)
-    if plan.coarse_mls and len(v) and np.isfinite(radius):
+    if plan.coarse_mls and np.isfinite(radius):
         return _blended(v, f, given_normals, [radius], query, plan, progress, coarse)[0]
     return _run_one(v, f, given_normals, radius, query, plan, progress)
 

@@ -48,7 +48,6 @@ runs at the default radius, at a given one and at each of a list of radii; with
 Used by :func:`meshcurv.principal_curvatures` unless ``Options.coarse_fit`` is "circles".
 """
 
-from functools import cache
 from typing import Callable, NamedTuple
 
 import numpy as np
@@ -58,7 +57,8 @@ from .fit.mls import STEP, mls_curvature
 from .fit.outliers import outlier_weight
 from .neighbors import power_of_two_scale
 from .neighbors.radius import _longest_edges
-from .pipeline import BLOCK, _sample_queries, ball_search, clean_fraction, kring_search
+from .pipeline import (BLOCK, _sample_queries, _search_like, ball_search, clean_fraction,
+                       kring_search)
 from .weld import expand_rows
 
 __all__ = ["estimate", "sampling_limited", "support", "mls_rows", "SUPPORT_EDGES",
@@ -135,6 +135,8 @@ def estimate(v, f, radii, query, circle_fits, use_kring=True, coarse=True, probe
     that keeps the radius's square finite (the same curvatures at any scale).
     """
     n = len(v)
+    if n == 0:                      # nothing to probe or blend
+        return circle_fits(np.arange(0))
     whole = query is None or (len(query) == n and np.array_equal(query, np.arange(n)))
     scales = [_supports(v, f, r, use_kring, probed=not coarse) for r in radii]
     probe = _sample_queries(n, PROBE_ROWS)
@@ -174,28 +176,21 @@ class _Scale(NamedTuple):
 
 
 def _supports(v, f, radius, use_kring, probed):
-    """The :class:`_Scale` of ``radius``: lists over the mesh's k-rings (``use_kring``) or in
-    balls. The passes' lists reach the largest support, the probe's ``PROBE_SCALE`` times it;
-    but a ball search lists in the order of its grid, whose cells follow its reach, so where
-    the input is ``probed`` the passes read the probe's ball lists (the order of the sums the
-    golden outputs record)."""
+    """The :class:`_Scale` of ``radius``: lists over the mesh's k-rings (``use_kring``, one
+    edge adjacency for both) or in balls. The passes' lists reach the largest support, the
+    probe's ``PROBE_SCALE`` times it; but a ball search lists in the order of its grid, whose
+    cells follow its reach, so where the input is ``probed`` the passes read the probe's ball
+    lists (the order of the sums the golden outputs record)."""
     unit = power_of_two_scale(radius)
     with np.errstate(over="ignore"):
         vs = v * unit if unit != 1.0 else v
     h = support(vs, f, radius * unit)
+    reach = float(h.max()) * (1.0 + 2.0 * STEP)
+    wide = reach * (PROBE_SCALE if probed else 1.0)
     finite = None if use_kring else np.flatnonzero(np.isfinite(vs).all(axis=1))
-
-    def lists(wide):
-        # the search is built at its first use (the probe's is not where nothing is probed)
-        @cache
-        def search():
-            reach = float(h.max()) * wide * (1.0 + 2.0 * STEP)
-            return _lists(kring_search(vs, f, reach) if use_kring else
-                          ball_search(vs, finite, reach))
-        return lambda idx: search()(idx)
-    probe_search = lists(PROBE_SCALE)
-    return _Scale(unit, vs, h, probe_search if probed and not use_kring else lists(1.0),
-                  probe_search)
+    search = kring_search(vs, f, reach) if use_kring else ball_search(vs, finite, wide)
+    probe_search = _search_like(search, vs, f, finite, wide) if use_kring else search
+    return _Scale(unit, vs, h, _lists(search), _lists(probe_search))
 
 
 def _chain(search, query):

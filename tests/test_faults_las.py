@@ -317,3 +317,30 @@ def test_tiled_run_of_a_quantized_georeferenced_cloud_equals_the_untiled_run_bit
     for name in ("k1", "k2", "d1", "d2", "normals", "valid", "n_neighbors", "n_samples",
                  "residual", "noise"):
         np.testing.assert_array_equal(getattr(tiled, name), getattr(untiled, name), err_msg=name)
+
+@pytest.mark.skipif(signal.getsignal(signal.SIGINT) is signal.SIG_IGN,
+                    reason="SIGINT is ignored in this session")
+def test_ctrl_c_before_a_dask_call_starts_logs_no_traceback(caplog):
+    """distributed's sync() logs a NameError traceback (through tornado) when a Ctrl-C arrives
+    before its task started; the tiled run reports the interrupt in one line instead. The
+    client's event loop is held busy so the interrupt lands in that window every time."""
+    import asyncio
+    import threading
+    import time
+
+    from meshcurv.tiled.cluster import dask_client
+
+    async def long_task():
+        await asyncio.sleep(5)
+
+    interrupted = False
+    with dask_client(None, 1) as (client, _):
+        try:
+            client.loop.add_callback(time.sleep, 0.5)
+            threading.Timer(0.1, os.kill, (os.getpid(), signal.SIGINT)).start()
+            client.sync(long_task)
+        except KeyboardInterrupt:
+            interrupted = True
+        time.sleep(1.0)  # the loop runs sync()'s cancel callback after its 0.5 s
+    assert interrupted
+    assert not [r for r in caplog.records if r.name.startswith("tornado")], caplog.text

@@ -49,13 +49,13 @@ def dask_client(scheduler, n_workers, threads_per_task=None):
     ``NUMBA_NUM_THREADS``), also the size of each worker's numba thread pool; else None
     (numba's default, all cores of the worker's machine).
     """
-    from distributed import Client, LocalCluster
+    from distributed import Client
 
     if threads_per_task is not None and int(threads_per_task) < 1:
         raise ValueError(f"threads_per_task must be at least 1, got {threads_per_task}")
     if scheduler is not None:
         try:
-            with connect(scheduler) as client:
+            with _drop_interrupted_sync_error(), connect(scheduler) as client:
                 yield client, threads_per_task
         finally:
             _set_distributed_log_level(None)
@@ -64,6 +64,18 @@ def dask_client(scheduler, n_workers, threads_per_task=None):
     threads = int(threads_per_task or threads_per_process(n_workers))
     # the workers' thread pools sized to their share (the nanny sets it before numba loads)
     env = {k: v for k, v in process_environment(threads).items() if k == "NUMBA_NUM_THREADS"}
+    with _drop_interrupted_sync_error():
+        with _local_cluster(n_workers, env) as cluster, Client(cluster) as client:
+            client.run(_quiet_worker)
+            yield client, threads
+
+
+@contextlib.contextmanager
+def _local_cluster(n_workers, env):
+    """A LocalCluster of ``n_workers`` one-thread worker processes that ignore Ctrl-C, closed on
+    exit; if the run inside fails or is interrupted, closed without distributed's warnings."""
+    from distributed import LocalCluster
+
     cluster = None
     try:
         with _workers_ignore_sigint():
@@ -71,9 +83,7 @@ def dask_client(scheduler, n_workers, threads_per_task=None):
             # warns ("Port 8787 is already in use") when another cluster holds it
             cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
                                    dashboard_address=":0", env=env)
-        with Client(cluster) as client:
-            client.run(_quiet_worker)
-            yield client, threads
+        yield cluster
     except BaseException:
         # interrupted or failed: the caller reports it in one line; the scheduler and nannies
         # in this process would add warnings about the workers they stop
@@ -109,15 +119,45 @@ def _workers_ignore_sigint():
         signal.signal(signal.SIGINT, old)
 
 
+class _InterruptedSyncError(logging.Filter):
+    """Drops the traceback distributed's event loop logs (through tornado) when a Ctrl-C reaches
+    ``distributed.utils.sync`` before its task started: its ``cancel`` callback then reads an
+    unassigned variable (NameError). The interrupt itself is reported by the caller in one line."""
+
+    def filter(self, record):
+        exc = record.exc_info[1] if record.exc_info else None
+        return not (isinstance(exc, NameError) and "sync.<locals>.cancel" in record.getMessage())
+
+
+@contextlib.contextmanager
+def _drop_interrupted_sync_error():
+    """Install :class:`_InterruptedSyncError` on tornado's callback logger while a client runs."""
+    logger, dropper = logging.getLogger("tornado.application"), _InterruptedSyncError()
+    logger.addFilter(dropper)
+    try:
+        yield
+    finally:
+        logger.removeFilter(dropper)
+
+
 def _quiet_worker():
     """Run in each worker process of our LocalCluster: the driver reports a failed task in one
     line (tile and reason), so the worker's own log of it (a multi-line "Compute Failed" block)
-    and its warnings while the cluster shuts down are not printed. A Ctrl-C is for the driver."""
+    and its warnings while the cluster shuts down are not printed. A Ctrl-C is for the driver.
+
+    The progress bars' lock is a thread lock: tqdm's default also takes a multiprocessing
+    semaphore, which a worker stopped mid-task (Ctrl-C, failed run) leaves registered, and
+    Python's resource tracker then warns about it ("leaked semaphore objects") after the
+    driver's one-line report.
+    """
     import signal
     import threading
 
+    from tqdm import tqdm as tqdm_std
+
     for name in ("distributed", "distributed.worker"):
         logging.getLogger(name).setLevel(logging.CRITICAL)
+    tqdm_std.set_lock(threading.RLock())
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
 

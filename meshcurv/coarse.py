@@ -53,7 +53,7 @@ from typing import Callable, NamedTuple
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .fit.mls import STEP, mls_curvature
+from .fit.mls import STEP, mls_curvature, mls_normals
 from .fit.outliers import outlier_weight
 from .neighbors import power_of_two_scale
 from .neighbors.radius import _longest_edges
@@ -309,8 +309,9 @@ def mls_rows(result, rows, v, normals, point_weights, h, search, unit=1.0, block
              out=None):
     """The MLS estimate of the rows ``rows`` of ``result`` (vertex indices, (m,)), blended
     into its fields (k1, k2, d1, d2, normals) by the row's noise (module docstring): a dict of
-    the blended fields, ``out`` (the arrays to write: all five fields, or "normals" alone;
-    they may be ``result``'s own) or new arrays.
+    the blended fields, ``out`` (the arrays to write: all five fields, or "normals" alone,
+    then from the MLS gradient alone, :func:`meshcurv.fit.mls.mls_normals`; they may be
+    ``result``'s own) or new arrays.
 
     ``v`` (n, 3) and ``h`` are the vertices and supports in the result's units times ``unit``
     (a power of two that keeps squares finite; curvatures are scaled back by it).
@@ -327,21 +328,40 @@ def mls_rows(result, rows, v, normals, point_weights, h, search, unit=1.0, block
     if out is None:
         out = {name: np.empty(np.shape(getattr(result, name))) for name in BLENDED}
     # a block at a time: the MLS fields of one block alive at once
+    curvatures = "k1" in out
     for lo in range(0, m, block):
         sl = slice(lo, min(m, lo + block))
-        k1, k2, d1, d2, n = _mls_curvatures(rows[sl], v, normals, result.normals[sl], h[sl],
-                                            search, point_weights, unit, block)
-        use = valid[sl] & np.isfinite(k1) & np.isfinite(k2)
+        if curvatures:
+            k1, k2, d1, d2, n = _mls_curvatures(rows[sl], v, normals, result.normals[sl],
+                                                h[sl], search, point_weights, unit, block)
+            use = valid[sl] & np.isfinite(k1) & np.isfinite(k2)
+        else:
+            n = _mls_normals(rows[sl], v, normals, result.normals[sl], h[sl], search,
+                             point_weights, block)
+            use = valid[sl] & np.isfinite(n).all(axis=1)
         g = np.where(use, share[sl], 0.0)
         # directions and normal: the larger share's
         mls_side = (g >= 0.5)[:, None]
-        if "k1" in out:
+        if curvatures:
             out["k1"][sl] = g * np.where(use, k1, 0.0) + (1.0 - g) * result.k1[sl]
             out["k2"][sl] = g * np.where(use, k2, 0.0) + (1.0 - g) * result.k2[sl]
             out["d1"][sl] = np.where(mls_side, d1, result.d1[sl])
             out["d2"][sl] = np.where(mls_side, d2, result.d2[sl])
         out["normals"][sl] = np.where(mls_side, n, result.normals[sl])
     return out
+
+
+def _mls_normals(rows, v, normals, row_normals, h, search, point_weights, block=BLOCK):
+    """The MLS surface's unit normals (m, 3) at the vertex indices ``rows`` (:func:`mls_normals`:
+    its gradient alone), NaN where it is undefined (arguments as :func:`_mls_curvatures`)."""
+    n = np.empty((len(rows), 3))
+    for lo in range(0, len(rows), block):
+        sl = slice(lo, min(len(rows), lo + block))
+        idx = rows[sl]
+        indptr, indices = search(idx)
+        mls_normals(v, normals, v[idx], row_normals[sl], idx, indptr, indices, h[sl],
+                    point_weights, n[sl])
+    return n
 
 
 def _mls_curvatures(rows, v, normals, row_normals, h, search, point_weights, unit=1.0,

@@ -8,8 +8,8 @@ from scipy.spatial import cKDTree
 
 import meshcurv
 from meshcurv import surfaces
-from meshcurv.fit.mls import STEP, mls_curvature
-from meshcurv.fit.mls_spec import mls_curvature_at, potential
+from meshcurv.fit.mls import STEP, mls_curvature, mls_normals
+from meshcurv.fit.mls_spec import mls_curvature_at, mls_normal_at, potential
 from meshcurv.neighbors import default_radius
 
 
@@ -68,6 +68,35 @@ def test_kernel_matches_the_specification():
             assert np.allclose(n[i], fn, atol=1e-9)
             assert min(np.abs(d1[i] - f1).max(), np.abs(d1[i] + f1).max()) < 1e-6
             assert np.allclose(np.cross(n[i], d1[i]), d2[i], atol=1e-12)
+
+
+def test_normals_kernel_matches_its_specification_and_the_curvature_kernels_normals():
+    v, _, truth = _coarse_torus()
+    rng = np.random.default_rng(1)
+    # tilted normals: the fits' normals then differ from the surface's
+    tilted = truth.normals + rng.normal(0.0, 0.05, truth.normals.shape)
+    tilted /= np.linalg.norm(tilted, axis=1, keepdims=True)
+    weights = rng.uniform(0.3, 1.0, len(v))
+    queries = np.arange(0, len(v), 13)
+    for w in (None, weights):
+        (_, _, _, _, n), found = _kernel(v, tilted, queries, 0.42, w)
+        indptr, indices, _ = _lists(v, 0.42 * (1 + 2 * STEP), queries)
+        only = np.empty((len(queries), 3))
+        # the query normals flipped: the result follows their side
+        mls_normals(v, tilted, v[queries], -tilted[queries], queries, indptr, indices,
+                    np.full(len(queries), 0.42), w, only)
+        assert np.array_equal(only, -n)       # the same gradient, bit for bit
+        for i, q in enumerate(queries):
+            spec = mls_normal_at(v[q], -tilted[q], v[found[i]], tilted[found[i]], 0.42,
+                                 None if w is None else w[found[i]])
+            # the gradient's differences amplify rounding by 1 / STEP (1e4)
+            assert np.allclose(only[i], spec, atol=1e-10)
+    # no point within the support: no normal
+    far = np.array([[10.0, 0.0, 0.0]])
+    out = np.empty((1, 3))
+    mls_normals(v, tilted, far, far, np.array([-1]), np.array([0, 0]), np.zeros(0, np.int64),
+                np.array([0.42]), None, out)
+    assert np.isnan(out).all()
 
 
 def test_sphere_is_exact_and_the_own_row_counts_once():

@@ -25,7 +25,7 @@ from numba import njit, prange
 
 from ..linalg import CHUNK
 
-__all__ = ["mls_curvature", "STEP"]
+__all__ = ["mls_curvature", "mls_normals", "STEP"]
 
 # Central-difference step, a fraction of the support h: F is smooth on the scale h, so the
 # truncation error is ~STEP^2 relative, and its values near the surface are ~|grad F| times
@@ -113,6 +113,23 @@ def _potential(pts, nrm, pw, k, weighted, x0, x1, x2, h2):
 
 
 @njit(cache=True)
+def _gradient(pts, nrm, pw, k, weighted, x, h, g, ends):
+    """``g[:]`` = grad F at x by central differences over the axis steps ``+-STEP h e_i``,
+    whose values are left in ``ends`` (2, 3) (ahead, behind) for the Hessian's diagonal; F of
+    :func:`_potential` over the ``k`` points of :func:`_gather`."""
+    h2 = h * h
+    s = STEP * h
+    x0, x1, x2 = x[0], x[1], x[2]
+    for i in range(3):
+        e0 = s if i == 0 else 0.0
+        e1 = s if i == 1 else 0.0
+        e2 = s if i == 2 else 0.0
+        ends[0, i] = _potential(pts, nrm, pw, k, weighted, x0 + e0, x1 + e1, x2 + e2, h2)
+        ends[1, i] = _potential(pts, nrm, pw, k, weighted, x0 - e0, x1 - e1, x2 - e2, h2)
+        g[i] = (ends[0, i] - ends[1, i]) / (2.0 * s)
+
+
+@njit(cache=True)
 def _curvature_one(pts, nrm, pw, k, weighted, x, nq, h, hess, g, ends, out):
     """``out[:]`` = (k1, k2, d1 (3), d2 (3), n (3)) at x from the ``k`` points of
     :func:`_gather` (see :func:`mls_curvature`); False (``out`` untouched) where F or its
@@ -121,14 +138,9 @@ def _curvature_one(pts, nrm, pw, k, weighted, x, nq, h, hess, g, ends, out):
     h2 = h * h
     s = STEP * h
     x0, x1, x2 = x[0], x[1], x[2]
+    _gradient(pts, nrm, pw, k, weighted, x, h, g, ends)
     f0 = _potential(pts, nrm, pw, k, weighted, x0, x1, x2, h2)
     for i in range(3):
-        e0 = s if i == 0 else 0.0
-        e1 = s if i == 1 else 0.0
-        e2 = s if i == 2 else 0.0
-        ends[0, i] = _potential(pts, nrm, pw, k, weighted, x0 + e0, x1 + e1, x2 + e2, h2)
-        ends[1, i] = _potential(pts, nrm, pw, k, weighted, x0 - e0, x1 - e1, x2 - e2, h2)
-        g[i] = (ends[0, i] - ends[1, i]) / (2.0 * s)
         hess[i, i] = (ends[0, i] - 2.0 * f0 + ends[1, i]) / (s * s)
     for i in range(3):
         for j in range(i + 1, 3):
@@ -245,3 +257,44 @@ def mls_curvature(points, normals, query_points, query_normals, query_rows, indp
                 d1[q, a] = row[2 + a] if ok else np.nan
                 d2[q, a] = row[5 + a] if ok else np.nan
                 nout[q, a] = row[8 + a] if ok else np.nan
+
+
+@njit(parallel=True, cache=True)
+def mls_normals(points, normals, query_points, query_normals, query_rows, indptr, indices,
+                support, point_weights, out):
+    """The MLS surface's unit normal at each query point: ``n`` of :func:`mls_curvature`
+    from the gradient's 6 evaluations alone (the same bits wherever that kernel gives one),
+    written to ``out`` (m, 3); NaN where F is undefined at an axis step or its gradient
+    vanishes. Arguments as :func:`mls_curvature`."""
+    m = query_points.shape[0]
+    most = 0
+    for q in range(m):
+        most = max(most, indptr[q + 1] - indptr[q])
+    weighted = point_weights is not None
+    nchunks = (m + CHUNK - 1) // CHUNK
+    for c in prange(nchunks):
+        g = np.empty(3)
+        ends = np.empty((2, 3))
+        x = np.empty(3)
+        pts = np.empty((most + 1, 3))
+        nrm = np.empty((most + 1, 3))
+        pw = np.empty(most + 1)
+        for q in range(c * CHUNK, min(m, (c + 1) * CHUNK)):
+            for a in range(3):
+                x[a] = query_points[q, a]
+            h = support[q]
+            length = np.nan
+            if np.isfinite(x[0] + x[1] + x[2]) and h > 0.0:
+                reach = h * (1.0 + 2.0 * STEP)     # the axis steps lie within STEP h of x
+                k = _gather(points, normals, point_weights, indices, indptr[q], indptr[q + 1],
+                            query_rows[q], x, reach * reach, pts, nrm, pw)
+                _gradient(pts, nrm, pw, k, weighted, x, h, g, ends)
+                length = math.sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
+            if not (np.isfinite(length) and length > 0.0):
+                for a in range(3):
+                    out[q, a] = np.nan
+                continue
+            nq = query_normals[q]
+            sign = 1.0 if g[0] * nq[0] + g[1] * nq[1] + g[2] * nq[2] >= 0.0 else -1.0
+            for a in range(3):
+                out[q, a] = g[a] * (sign / length)

@@ -6,7 +6,7 @@ import numpy as np
 from ..surfaces import implicit_curvature
 from .mls import STEP
 
-__all__ = ["potential", "mls_curvature_at"]
+__all__ = ["potential", "mls_curvature_at", "mls_normal_at"]
 
 
 def potential(x, points, normals, support, point_weights=None):
@@ -72,3 +72,19 @@ def mls_curvature_at(x, normal, points, normals, support, point_weights=None):
         grad, hess = -grad, -hess
     n, k1, k2, d1, d2 = implicit_curvature(grad, hess)
     return k1[0], k2[0], d1[0], d2[0], n[0]
+
+
+def mls_normal_at(x, normal, points, normals, support, point_weights=None):
+    """The unit normal grad F / |grad F| of the MLS surface at x, turned to ``normal``'s side,
+    by central differences over the axis steps ``+-STEP * support`` alone (the gradient of
+    :func:`mls_curvature_at`); NaNs where F is undefined there or its gradient vanishes."""
+    x = np.asarray(x, dtype=np.float64)
+    step = STEP * support
+    e = np.eye(3) * step
+    grad = np.array([potential(x + e[i], points, normals, support, point_weights)
+                     - potential(x - e[i], points, normals, support, point_weights)
+                     for i in range(3)]) / (2 * step)
+    length = np.linalg.norm(grad)
+    if not (np.isfinite(length) and length > 0):
+        return np.full(3, np.nan)
+    return grad / length * (1.0 if grad @ np.asarray(normal, dtype=np.float64) >= 0 else -1.0)

@@ -212,6 +212,17 @@ def test_inputs_whose_circle_fits_are_not_limited_by_the_sampling_keep_them():
             assert _same_bits(a, meshcurv.principal_curvatures(v, faces, coarse_fit="circles"))
 
 
+def test_a_cloud_with_normals_just_limited_by_its_sampling_gets_the_mls_surface():
+    # the 200 x 40 torus's vertices with their exact normals: probe ratio 2.45, just above
+    # DISAGREEMENT_RATIO; circle fits 0.00127, the blend 0.00020 (bound 1.5x that)
+    mesh = surfaces.torus(2.0, 0.5, 200, 40)
+    alone = meshcurv.principal_curvatures(mesh.vertices, normals=mesh.normals,
+                                          coarse_fit="circles")
+    assert _mean_dk(alone, mesh) == pytest.approx(0.00127, rel=0.05)
+    res = meshcurv.principal_curvatures(mesh.vertices, normals=mesh.normals)
+    assert res.valid.all() and _mean_dk(res, mesh) < 0.0003
+
+
 @pytest.mark.parametrize("torus, circles, limit", [
     # (mean |dk| of the circle fits alone, bound): measured 0.00093 / 0.0028 (120 x 30) and
     # 0.0038 / 0.0069 (trimesh's 96 x 24) with the MLS surface, meshes / clouds; bounds at

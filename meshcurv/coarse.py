@@ -55,7 +55,7 @@ from scipy.spatial import cKDTree
 
 from .fit.mls import STEP, mls_curvature, mls_normals
 from .fit.outliers import outlier_weight
-from .neighbors import power_of_two_scale
+from .neighbors import ball_counts, ball_grid, power_of_two_scale
 from .neighbors.radius import _longest_edges
 from .pipeline import (BLOCK, _sample_queries, _search_like, ball_search, clean_fraction,
                        kring_search)
@@ -296,15 +296,33 @@ def support(v, f, radius):
     if f is not None:
         reach, used = _longest_edges(v, np.asarray(f, np.int64))
     else:
-        finite = np.flatnonzero(np.isfinite(v).all(axis=1))
-        reach, used = np.zeros(len(v)), np.zeros(len(v), dtype=bool)
-        k = min(CLOUD_RING, len(finite) - 1)
-        if k >= 1:
-            d, _ = cKDTree(v[finite]).query(v[finite], k=k + 1, workers=-1)
-            reach[finite] = d[:, k]
-            used[finite] = np.isfinite(d[:, k])
+        reach, used = _cloud_reach(v, radius)
     h = np.clip(SUPPORT_EDGES * np.where(used, reach, 0.0), radius, SUPPORT_CAP * radius)
     return np.where(used, h, radius)
+
+
+def _cloud_reach(v, radius):
+    """Each cloud point's distance (n,) to its ``CLOUD_RING``-th nearest point, and whether
+    it has one (n,) bool; 0 where that distance is below ``radius / SUPPORT_EDGES``, whose
+    support is ``radius`` whatever it is: a count of the points in a ball of that size (a
+    grid, one pass) spares the dense points the k-d tree's search."""
+    finite = np.flatnonzero(np.isfinite(v).all(axis=1))
+    reach, used = np.zeros(len(v)), np.zeros(len(v), dtype=bool)
+    k = min(CLOUD_RING, len(finite) - 1)
+    if k < 1:
+        return reach, used
+    # a margin below the bound: the ball's count and the tree's distance round differently
+    near = radius / SUPPORT_EDGES * (1.0 - 1e-9)
+    grid = ball_grid(v[finite], near)
+    dense = np.zeros(len(finite), dtype=bool) if grid is None else \
+        ball_counts(grid, v[finite], near) > k
+    used[finite[dense]] = True
+    rest = finite[~dense]
+    if len(rest):
+        d, _ = cKDTree(v[finite]).query(v[rest], k=k + 1, workers=-1)
+        reach[rest] = d[:, k]
+        used[rest] = np.isfinite(d[:, k])
+    return reach, used
 
 
 # The result's fields the MLS surface's estimate blends into.

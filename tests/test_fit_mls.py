@@ -305,3 +305,21 @@ def test_coarse_estimate_is_invariant_to_rotation_translation_and_scale():
         assert res.valid.all()
         assert np.allclose(res.k1 * scale, base.k1, rtol=0, atol=1e-6)
         assert np.allclose(res.k2 * scale, base.k2, rtol=0, atol=1e-6)
+
+
+def test_cloud_support_is_the_rule_of_the_12th_nearest_point_bit_for_bit():
+    # support(): the grid count that spares dense points the k-d tree gives the rule's bits
+    from meshcurv.coarse import CLOUD_RING, SUPPORT_CAP, SUPPORT_EDGES, support
+
+    rng = np.random.default_rng(0)
+    v = rng.normal(size=(6000, 3)) * [1.0, 1.0, 0.01]
+    v[:3000] *= 20.0                                   # density falling 400x
+    v = np.vstack([v, v[:50], [[np.nan, 0.0, 0.0]], [[1e6, 0.0, 0.0]]])  # duplicates, NaN, far
+    finite = np.isfinite(v).all(axis=1)
+    d = cKDTree(v[finite]).query(v[finite], k=CLOUD_RING + 1)[0][:, CLOUD_RING]
+    for radius in (0.05, 0.5, 3.0):
+        expected = np.full(len(v), radius)
+        expected[finite] = np.clip(SUPPORT_EDGES * d, radius, SUPPORT_CAP * radius)
+        h = support(v, None, radius)
+        assert np.array_equal(h, expected)
+        assert 0 < (h > radius).sum() < len(v)        # both kinds of point present

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import Delaunay
 
-__all__ = ["Surface", "paraboloid", "monkey_saddle", "scan_terrain", "sphere", "ellipsoid",
+__all__ = ["Surface", "paraboloid", "monkey_saddle", "egg_crate", "saddle", "scan_terrain", "sphere", "ellipsoid",
            "cylinder", "torus",
            "torus_at", "goursat_function", "goursat_at", "implicit_curvature",
            "project_to_implicit", "add_normal_noise", "orient_faces"]
@@ -147,6 +147,25 @@ def monkey_saddle(sampling="regular", extent=0.5, spacing=0.01, n=10000, seed=0)
     x, y, faces, border = _xy_samples(extent, sampling, spacing, n, seed)
     return _monge("monkey_saddle", x, y, x ** 3 - 3 * x * y * y, 3 * x * x - 3 * y * y,
                   -6 * x * y, 6 * x, -6 * y, -6 * x, 1.0, faces, border)
+
+
+def egg_crate(sampling="regular", amplitude=0.3, extent=3.0, spacing=0.05, n=20000, seed=0):
+    """Egg crate z = amplitude sin x sin y on [-extent, extent]^2, upward normals: bumps, dips
+    and saddles side by side, curvature varying everywhere (|k| up to ``amplitude``)."""
+    x, y, faces, border = _xy_samples(extent, sampling, spacing, n, seed)
+    sx, cx, sy, cy = np.sin(x), np.cos(x), np.sin(y), np.cos(y)
+    a = amplitude
+    return _monge("egg_crate", x, y, a * sx * sy, a * cx * sy, a * sx * cy, -a * sx * sy,
+                  a * cx * cy, -a * sx * sy, 1.0, faces, border)
+
+
+def saddle(sampling="regular", a=0.25, extent=2.0, spacing=0.05, n=20000, seed=0):
+    """Hyperbolic paraboloid z = a (x^2 - y^2) on [-extent, extent]^2, upward normals: k1 = 2a,
+    k2 = -2a at the origin, Gaussian curvature negative everywhere."""
+    x, y, faces, border = _xy_samples(extent, sampling, spacing, n, seed)
+    z0 = np.zeros_like(x)
+    return _monge("saddle", x, y, a * (x * x - y * y), 2 * a * x, -2 * a * y, 2 * a + z0, z0,
+                  -2 * a + z0, 1.0, faces, border)
 
 
 def scan_terrain(spacing=(0.05, 0.25), jitter=0.0, wavelength=4 * np.pi, amplitude=0.1,

@@ -619,15 +619,21 @@ def _mesh_surfaces(size):
         return [("torus", S.torus(2.0, 0.5, 60, 15), 0.6, (0.0, 0.003)),
                 ("paraboloid", S.paraboloid(spacing=0.5), 2.0, (0.0,)),
                 ("ellipsoid", S.ellipsoid((2.0, 1.5, 1.0), 3), 0.6, (0.0,)),
-                ("cylinder 32x16", cyl, None, (0.0,))]
+                ("cylinder 32x16", cyl, None, (0.0,)),
+                ("egg crate, random", S.egg_crate("random", n=2000), None, (0.0,))]
     return [("torus", S.torus(2.0, 0.5, 240, 60), 0.3, NOISE_LEVELS),
             ("paraboloid", S.paraboloid(spacing=0.2), 2.0, (0.0,)),
             ("ellipsoid", S.ellipsoid((2.0, 1.5, 1.0), 5), 0.3, (0.0,)),
-            ("cylinder 32x16", cyl, None, (0.0,))]
+            ("cylinder 32x16", cyl, None, (0.0,)),
+            # surfaces no constant was chosen on: curvature varying everywhere, saddles
+            ("egg crate", S.egg_crate(), None, (0.0, 0.001)),
+            ("egg crate, random", S.egg_crate("random", n=20000), None, (0.0,)),
+            ("saddle, random", S.saddle("random", n=20000), None, (0.0,))]
 
 
 def group_surfaces(methods, size, switches, timeout, **_):
-    """Clean and noisy torus, clean paraboloid, ellipsoid and cylinder meshes (faces given);
+    """Clean and noisy torus, clean paraboloid, ellipsoid, cylinder, egg crate and saddle
+    meshes (faces given);
     errors over the vertices at least one radius from a border; on the cylinder also
     max |K| / k1^2 (exact K = 0, k1 the exact 1 / radius)."""
     from meshcurv.neighbors import default_radius
@@ -999,7 +1005,11 @@ GROUP_TEXT = {
                  "square quads (each split in two triangles) at meshcurv's default radius, "
                  "where max\\|K\\|/k1² is the largest \\|k1 k2\\| / k1_exact² (exact K = 0) "
                  "at its vertices at least one radius from the border, and at all but the two "
-                 "border rings. Errors over the vertices at least one radius from a border."),
+                 "border rings; surfaces no constant of meshcurv was chosen on, at its "
+                 "default radius: egg crate z = 0.3 sin x sin y on [-3, 3]^2 (a regular grid of "
+                 "spacing 0.05, clean and with 0.1 % noise; 20k random points, Delaunay), "
+                 "saddle z = 0.25 (x^2 - y^2) on [-2, 2]^2 (20k random points, Delaunay). "
+                 "Errors over the vertices at least one radius from a border."),
     "cnc": ("The CNC benchmark clouds (Lachaud et al. 2023)",
             "The six clouds of `../shared/bench/cnc` under the paper's noise model (Gaussian, "
             "per coordinate: sigma_eps on the positions, sigma_xi on the normals, then "

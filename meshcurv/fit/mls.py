@@ -15,7 +15,11 @@ low-poly torus: 16 vertices around the tube), where the circle fits in normal se
 :mod:`meshcurv.fit.fused` are far less accurate. It needs normals and is more sensitive to
 position noise than the circle fits; :mod:`meshcurv.coarse` says where it is used.
 
-Numpy specification: :func:`meshcurv.fit.mls_spec.mls_curvature_at`.
+:func:`mls_normals` gives the normal alone from the gradient's 6 evaluations (the MLS passes
+that only feed normals to the next one).
+
+Numpy specification: :func:`meshcurv.fit.mls_spec.mls_curvature_at` and
+:func:`~meshcurv.fit.mls_spec.mls_normal_at`.
 """
 
 import math
@@ -33,6 +37,15 @@ __all__ = ["mls_curvature", "mls_normals", "STEP"]
 # balances the two at ~1e-8 (a coarse torus rotated or scaled by 1e-3 moves k by 4e-8 of
 # itself; 5e-7 with 1e-3, mostly the truncation's dependence on the axes).
 STEP = 1e-4
+
+
+@njit(cache=True)
+def _longest(indptr):
+    """The length of the longest of the CSR lists ``indptr``."""
+    most = 0
+    for q in range(len(indptr) - 1):
+        most = max(most, indptr[q + 1] - indptr[q])
+    return most
 
 
 @njit(cache=True)
@@ -223,9 +236,7 @@ def mls_curvature(points, normals, query_points, query_normals, query_rows, indp
     """
     k1, k2, d1, d2, nout = out
     m = query_points.shape[0]
-    most = 0
-    for q in range(m):
-        most = max(most, indptr[q + 1] - indptr[q])
+    most = _longest(indptr)
     weighted = point_weights is not None
     nchunks = (m + CHUNK - 1) // CHUNK
     for c in prange(nchunks):
@@ -267,9 +278,7 @@ def mls_normals(points, normals, query_points, query_normals, query_rows, indptr
     written to ``out`` (m, 3); NaN where F is undefined at an axis step or its gradient
     vanishes. Arguments as :func:`mls_curvature`."""
     m = query_points.shape[0]
-    most = 0
-    for q in range(m):
-        most = max(most, indptr[q + 1] - indptr[q])
+    most = _longest(indptr)
     weighted = point_weights is not None
     nchunks = (m + CHUNK - 1) // CHUNK
     for c in prange(nchunks):

@@ -344,3 +344,16 @@ def test_ctrl_c_before_a_dask_call_starts_logs_no_traceback(caplog):
         time.sleep(1.0)  # the loop runs sync()'s cancel callback after its 0.5 s
     assert interrupted
     assert not [r for r in caplog.records if r.name.startswith("tornado")], caplog.text
+
+
+def test_workers_restarted_after_a_crash_still_leave_ctrl_c_to_the_driver():
+    # the nanny starts a crashed worker again: it must ignore SIGINT as the first one did
+    from meshcurv.tiled.cluster import dask_client
+
+    def sigint_ignored():
+        return signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+
+    with dask_client(None, 1) as (client, _):
+        assert all(client.run(sigint_ignored).values())
+        client.restart()
+        assert all(client.run(sigint_ignored).values())

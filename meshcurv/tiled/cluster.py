@@ -66,7 +66,7 @@ def dask_client(scheduler, n_workers, threads_per_task=None):
     env = {k: v for k, v in process_environment(threads).items() if k == "NUMBA_NUM_THREADS"}
     with _drop_interrupted_sync_error():
         with _local_cluster(n_workers, env) as cluster, Client(cluster) as client:
-            client.run(_quiet_worker)
+            client.register_plugin(_quiet_worker_plugin())
             yield client, threads
 
 
@@ -104,7 +104,8 @@ def _workers_ignore_sigint():
     The workers inherit the ignored signal, so a Ctrl-C in the terminal (sent to the whole
     process group) reaches only the driver, which closes the cluster and reports one line,
     instead of every worker printing a KeyboardInterrupt traceback. A Ctrl-C during these
-    seconds of start-up is lost; workers restarted later get it again (see _quiet_worker).
+    seconds of start-up is lost; workers the nanny restarts later (after a crash) ignore it
+    through :func:`_quiet_worker_plugin`.
     """
     import signal
     import threading
@@ -138,6 +139,20 @@ def _drop_interrupted_sync_error():
         yield
     finally:
         logger.removeFilter(dropper)
+
+
+def _quiet_worker_plugin():
+    """A ``distributed`` WorkerPlugin that runs :func:`_quiet_worker` in every worker process
+    of our LocalCluster, those the nanny starts again after a crash included."""
+    from distributed.diagnostics.plugin import WorkerPlugin
+
+    class QuietWorker(WorkerPlugin):
+        name = "meshcurv-quiet-worker"
+
+        def setup(self, worker):
+            _quiet_worker()
+
+    return QuietWorker()
 
 
 def _quiet_worker():

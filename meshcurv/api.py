@@ -243,7 +243,8 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
     CurvatureResult (a list of them for a list of radii)
         ``k1, k2, d1, d2, normals, valid, status, mean, gaussian, shape_index, curvedness``, the
         diagnostics ``n_neighbors, n_samples, residual, noise`` (one row per vertex, or per
-        query), the ``radius`` used and each row's ``radius_used``.
+        query), the ``radius`` used, each row's ``radius_used`` and, where the MLS blend of
+        :mod:`meshcurv.coarse` ran, each row's ``mls_share``.
 
     Raises
     ------

@@ -243,11 +243,14 @@ def _passes(base, fitted, chain, scale):
         # the passes before the last give normals alone; the last blends into the arrays of
         # ``part`` (rows copied from ``base``, or ``base`` itself, which no pass reads after)
         last = i == len(chain)
-        out = {name: getattr(part, name) for name in BLENDED} if last else \
+        out = {**{name: getattr(part, name) for name in BLENDED},
+               "mls_share": np.empty(len(rows))} if last else \
             {"normals": np.empty((len(rows), 3))}
         mls_rows(part, rows, scale.v, normals, weights, scale.h[rows], scale.search,
                  scale.unit, out=out)
         normals[rows] = out["normals"]
+        if last:
+            part.mls_share = out["mls_share"]
     return part
 
 
@@ -335,7 +338,8 @@ def mls_rows(result, rows, v, normals, point_weights, h, search, unit=1.0, block
     into its fields (k1, k2, d1, d2, normals) by the row's noise (module docstring): a dict of
     the blended fields, ``out`` (the arrays to write: all five fields, or "normals" alone,
     then from the MLS gradient alone, :func:`meshcurv.fit.mls.mls_normals`; they may be
-    ``result``'s own) or new arrays.
+    ``result``'s own; with an "mls_share" (m,) array, each row's share of the MLS estimate
+    is written there too) or new arrays.
 
     ``v`` (n, 3) and ``h`` are the vertices and supports in the result's units times ``unit``
     (a power of two that keeps squares finite; curvatures are scaled back by it).
@@ -366,6 +370,8 @@ def mls_rows(result, rows, v, normals, point_weights, h, search, unit=1.0, block
         g = np.where(use, share[sl], 0.0)
         # directions and normal: the larger share's
         mls_side = (g >= 0.5)[:, None]
+        if "mls_share" in out:
+            out["mls_share"][sl] = g
         if curvatures:
             out["k1"][sl] = g * np.where(use, k1, 0.0) + (1.0 - g) * result.k1[sl]
             out["k2"][sl] = g * np.where(use, k2, 0.0) + (1.0 - g) * result.k2[sl]

@@ -84,6 +84,11 @@ class CurvatureResult:
         (:mod:`meshcurv.scale`), the wider radius where ``sparse_retry`` re-estimated a row
         that had too few points; NaN where ``valid`` is False. None where the producer does
         not tell (then ``radius`` where valid)
+    mls_share : (n,) float64 in [0, 1] or None, the share of the MLS surface's curvature in
+        each row's k1 and k2 (:mod:`meshcurv.coarse`; where it is at least 0.5, d1, d2 and
+        the normal are the MLS surface's too); 0 where the row kept its circle fits. None
+        where no MLS blend ran: ``coarse_fit="circles"``, tiled runs, and inputs whose
+        circle fits the probe found not limited by their sampling
     """
 
     k1: np.ndarray
@@ -101,6 +106,7 @@ class CurvatureResult:
     orientation: str = None
     outlier_score: np.ndarray = None
     radius_used: np.ndarray = None
+    mls_share: np.ndarray = None
 
     @property
     def mean(self):

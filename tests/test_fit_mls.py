@@ -7,6 +7,7 @@ import trimesh
 from scipy.spatial import cKDTree
 
 import meshcurv
+from meshcurv import coarse as coarse_mls
 from meshcurv import surfaces
 from meshcurv.fit.mls import STEP, mls_curvature, mls_normals
 from meshcurv.fit.mls_spec import mls_curvature_at, mls_normal_at, potential
@@ -186,7 +187,7 @@ def test_coarse_queries_give_the_rows_of_the_whole_input(faces):
     whole = meshcurv.principal_curvatures(v, f)
     q = np.array([7, 500, 3, 1000, 7])
     part = meshcurv.principal_curvatures(v, f, query=q)
-    for name in ("k1", "k2", "d1", "d2", "normals", "noise"):
+    for name in ("k1", "k2", "d1", "d2", "normals", "noise", "mls_share"):
         assert np.allclose(getattr(part, name), getattr(whole, name)[q], rtol=0, atol=1e-12)
 
 
@@ -256,7 +257,7 @@ def test_probed_queries_give_the_rows_of_the_whole_input(faces, radius):
                                                                coarse_fit="circles"))
     q = np.array([7, 3000, 3, 1000, 7])
     part = meshcurv.principal_curvatures(mesh.vertices, f, radius=radius, query=q)
-    for name in ("k1", "k2", "d1", "d2", "normals", "noise"):
+    for name in ("k1", "k2", "d1", "d2", "normals", "noise", "mls_share"):
         assert np.allclose(getattr(part, name), getattr(whole, name)[q], rtol=0, atol=1e-12)
 
 
@@ -273,6 +274,26 @@ def test_radius_auto_blends_where_the_default_does(torus):
     alone = _mean_dk(meshcurv.principal_curvatures(v, f, radius="auto", coarse_fit="circles"),
                      truth)
     assert auto <= default and auto < 0.35 * alone
+
+
+def test_the_result_says_how_much_of_each_row_is_the_mls_surfaces():
+    # mls_share: the blend's weight g = 1 / (1 + (noise / (0.015 R))^4) per row, 0 where the
+    # row kept its circle fits; None where no blend ran
+    from meshcurv.pipeline import clean_fraction
+
+    v, f, truth = _coarse_torus()
+    res = meshcurv.principal_curvatures(v, f)
+    assert np.array_equal(res.mls_share,
+                          clean_fraction(res.noise, coarse_mls.NOISE_SCALE * res.radius))
+    assert res.mls_share.min() > 0.9            # clean: measured 0.908-0.997
+    assert meshcurv.principal_curvatures(v, f, coarse_fit="circles").mls_share is None
+    # a clean ellipsoid: the probe keeps the circle fits, no blend
+    e = surfaces.ellipsoid((2.0, 1.5, 1.0), 4)
+    assert meshcurv.principal_curvatures(e.vertices, e.faces).mls_share is None
+    # a row with no estimate keeps share 0
+    bad = v.copy()
+    bad[5] = np.nan
+    assert meshcurv.principal_curvatures(bad, f).mls_share[5] == 0.0
 
 
 def test_noise_leaves_coarse_tori_to_the_circle_fits():

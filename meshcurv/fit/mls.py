@@ -143,6 +143,20 @@ def _gradient(pts, nrm, pw, k, weighted, x, h, g, ends):
 
 
 @njit(cache=True)
+def _unit_normal(g, nq, out):
+    """``out[8:11]`` = the unit gradient ``g`` turned to ``nq``'s side; returns the factor
+    that made it (sign / |g|), 0.0 (``out`` untouched) where |g| is 0 or not finite."""
+    length = math.sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
+    if not (np.isfinite(length) and length > 0.0):
+        return 0.0
+    sign = 1.0 if g[0] * nq[0] + g[1] * nq[1] + g[2] * nq[2] >= 0.0 else -1.0
+    scale = sign / length
+    for a in range(3):
+        out[8 + a] = g[a] * scale
+    return scale
+
+
+@njit(cache=True)
 def _curvature_one(pts, nrm, pw, k, weighted, x, nq, h, hess, g, ends, out):
     """``out[:]`` = (k1, k2, d1 (3), d2 (3), n (3)) at x from the ``k`` points of
     :func:`_gather` (see :func:`mls_curvature`); False (``out`` untouched) where F or its
@@ -166,11 +180,12 @@ def _curvature_one(pts, nrm, pw, k, weighted, x, nq, h, hess, g, ends, out):
             hess[i, j] = (both - ends[0, i] - ends[1, i] - ends[0, j] - ends[1, j]
                           + 2.0 * f0) / (2.0 * s * s)
             hess[j, i] = hess[i, j]
-    length = math.sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
-    if not (np.isfinite(length) and length > 0.0 and np.isfinite(hess.sum())):
+    if not np.isfinite(hess.sum()):
         return False
-    sign = 1.0 if g[0] * nq[0] + g[1] * nq[1] + g[2] * nq[2] >= 0.0 else -1.0
-    n0, n1, n2 = g[0] * (sign / length), g[1] * (sign / length), g[2] * (sign / length)
+    scale = _unit_normal(g, nq, out)
+    if scale == 0.0:
+        return False
+    n0, n1, n2 = out[8], out[9], out[10]
     # the shape operator as meshcurv.surfaces.implicit_curvature forms it (the spec's): t1 the
     # axis x (y where the normal is near x) made orthogonal to n, t2 = n x t1
     a0, a1 = (1.0, 0.0) if abs(n0) < 0.9 else (0.0, 1.0)
@@ -179,7 +194,6 @@ def _curvature_one(pts, nrm, pw, k, weighted, x, nq, h, hess, g, ends, out):
     tl = math.sqrt(t10 * t10 + t11 * t11 + t12 * t12)
     t10, t11, t12 = t10 / tl, t11 / tl, t12 / tl
     t20, t21, t22 = n1 * t12 - n2 * t11, n2 * t10 - n0 * t12, n0 * t11 - n1 * t10
-    scale = sign / length
     s11 = s12 = s22 = 0.0
     for a in range(3):
         ta = t10 if a == 0 else (t11 if a == 1 else t12)
@@ -206,13 +220,10 @@ def _curvature_one(pts, nrm, pw, k, weighted, x, nq, h, hess, g, ends, out):
     out[5] = n1 * d2 - n2 * d1
     out[6] = n2 * d0 - n0 * d2
     out[7] = n0 * d1 - n1 * d0
-    out[8] = n0
-    out[9] = n1
-    out[10] = n2
     return True
 
 
-@njit(parallel=True, cache=True)
+@njit(cache=True)
 def mls_curvature(points, normals, query_points, query_normals, query_rows, indptr, indices,
                   support, point_weights, out):
     """MLS curvature at each query point.
@@ -234,7 +245,27 @@ def mls_curvature(points, normals, query_points, query_normals, query_rows, indp
         directions and the unit normal of the MLS surface (d1, d2, n right-handed); NaN
         where the fit is undefined at a stencil point (too few points within h)
     """
-    k1, k2, d1, d2, nout = out
+    _mls_kernel(points, normals, query_points, query_normals, query_rows, indptr, indices,
+                support, point_weights, False, out[0], out[1], out[2], out[3], out[4])
+
+
+@njit(cache=True)
+def mls_normals(points, normals, query_points, query_normals, query_rows, indptr, indices,
+                support, point_weights, out):
+    """The MLS surface's unit normal at each query point: ``n`` of :func:`mls_curvature`
+    from the gradient's 6 evaluations alone (the same bits wherever that kernel gives one),
+    written to ``out`` (m, 3); NaN where F is undefined at an axis step or its gradient
+    vanishes. Arguments as :func:`mls_curvature`."""
+    none, none3 = np.empty(0), np.empty((0, 3))
+    _mls_kernel(points, normals, query_points, query_normals, query_rows, indptr, indices,
+                support, point_weights, True, none, none, none3, none3, out)
+
+
+@njit(parallel=True, cache=True)
+def _mls_kernel(points, normals, query_points, query_normals, query_rows, indptr, indices,
+                support, point_weights, gradient_only, k1, k2, d1, d2, nout):
+    """:func:`mls_curvature` (``gradient_only`` False) or :func:`mls_normals` (True: ``k1``,
+    ``k2``, ``d1`` and ``d2`` are not written)."""
     m = query_points.shape[0]
     most = _longest(indptr)
     weighted = point_weights is not None
@@ -246,7 +277,7 @@ def mls_curvature(points, normals, query_points, query_normals, query_rows, indp
         row = np.empty(11)
         x = np.empty(3)
         nq = np.empty(3)
-        # the points of one query's fits, gathered once for its 13 evaluations
+        # the points of one query's fits, gathered once for its 13 (6) evaluations
         pts = np.empty((most + 1, 3))
         nrm = np.empty((most + 1, 3))
         pw = np.empty(most + 1)
@@ -261,49 +292,18 @@ def mls_curvature(points, normals, query_points, query_normals, query_rows, indp
                 reach = h * (1.0 + 4.0 * STEP)
                 k = _gather(points, normals, point_weights, indices, indptr[q], indptr[q + 1],
                             query_rows[q], x, reach * reach, pts, nrm, pw)
-                ok = _curvature_one(pts, nrm, pw, k, weighted, x, nq, h, hess, g, ends, row)
+                if gradient_only:
+                    _gradient(pts, nrm, pw, k, weighted, x, h, g, ends)
+                    ok = _unit_normal(g, nq, row) != 0.0
+                else:
+                    ok = _curvature_one(pts, nrm, pw, k, weighted, x, nq, h, hess, g, ends,
+                                        row)
+            for a in range(3):
+                nout[q, a] = row[8 + a] if ok else np.nan
+            if gradient_only:
+                continue
             k1[q] = row[0] if ok else np.nan
             k2[q] = row[1] if ok else np.nan
             for a in range(3):
                 d1[q, a] = row[2 + a] if ok else np.nan
                 d2[q, a] = row[5 + a] if ok else np.nan
-                nout[q, a] = row[8 + a] if ok else np.nan
-
-
-@njit(parallel=True, cache=True)
-def mls_normals(points, normals, query_points, query_normals, query_rows, indptr, indices,
-                support, point_weights, out):
-    """The MLS surface's unit normal at each query point: ``n`` of :func:`mls_curvature`
-    from the gradient's 6 evaluations alone (the same bits wherever that kernel gives one),
-    written to ``out`` (m, 3); NaN where F is undefined at an axis step or its gradient
-    vanishes. Arguments as :func:`mls_curvature`."""
-    m = query_points.shape[0]
-    most = _longest(indptr)
-    weighted = point_weights is not None
-    nchunks = (m + CHUNK - 1) // CHUNK
-    for c in prange(nchunks):
-        g = np.empty(3)
-        ends = np.empty((2, 3))
-        x = np.empty(3)
-        pts = np.empty((most + 1, 3))
-        nrm = np.empty((most + 1, 3))
-        pw = np.empty(most + 1)
-        for q in range(c * CHUNK, min(m, (c + 1) * CHUNK)):
-            for a in range(3):
-                x[a] = query_points[q, a]
-            h = support[q]
-            length = np.nan
-            if np.isfinite(x[0] + x[1] + x[2]) and h > 0.0:
-                reach = h * (1.0 + 2.0 * STEP)     # the axis steps lie within STEP h of x
-                k = _gather(points, normals, point_weights, indices, indptr[q], indptr[q + 1],
-                            query_rows[q], x, reach * reach, pts, nrm, pw)
-                _gradient(pts, nrm, pw, k, weighted, x, h, g, ends)
-                length = math.sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
-            if not (np.isfinite(length) and length > 0.0):
-                for a in range(3):
-                    out[q, a] = np.nan
-                continue
-            nq = query_normals[q]
-            sign = 1.0 if g[0] * nq[0] + g[1] * nq[1] + g[2] * nq[2] >= 0.0 else -1.0
-            for a in range(3):
-                out[q, a] = g[a] * (sign / length)

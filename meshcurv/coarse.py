@@ -243,14 +243,14 @@ def _passes(base, fitted, chain, scale):
         # the passes before the last give normals alone; the last blends into the arrays of
         # ``part`` (rows copied from ``base``, or ``base`` itself, which no pass reads after)
         last = i == len(chain)
-        out = {**{name: getattr(part, name) for name in BLENDED},
-               "mls_share": np.empty(len(rows))} if last else \
-            {"normals": np.empty((len(rows), 3))}
+        if last:
+            part.mls_share = np.empty(len(rows))
+            out = {name: getattr(part, name) for name in BLENDED + ("mls_share",)}
+        else:
+            out = {"normals": np.empty((len(rows), 3))}
         mls_rows(part, rows, scale.v, normals, weights, scale.h[rows], scale.search,
                  scale.unit, out=out)
         normals[rows] = out["normals"]
-        if last:
-            part.mls_share = out["mls_share"]
     return part
 
 
@@ -316,13 +316,14 @@ def _cloud_reach(v, radius):
         return reach, used
     # a margin below the bound: the ball's count and the tree's distance round differently
     near = radius / SUPPORT_EDGES * (1.0 - 1e-9)
-    grid = ball_grid(v[finite], near)
+    vf = v[finite]
+    grid = ball_grid(vf, near)
     dense = np.zeros(len(finite), dtype=bool) if grid is None else \
-        ball_counts(grid, v[finite], near) > k
+        ball_counts(grid, vf, near) > k
     used[finite[dense]] = True
     rest = finite[~dense]
     if len(rest):
-        d, _ = cKDTree(v[finite]).query(v[rest], k=k + 1, workers=-1)
+        d, _ = cKDTree(vf).query(v[rest], k=k + 1, workers=-1)
         reach[rest] = d[:, k]
         used[rest] = np.isfinite(d[:, k])
     return reach, used

@@ -146,6 +146,23 @@ def solve_sym(m, rhs, npar, sol):
 
 
 @njit(cache=True)
+def inverse_entry(m, npar, k, y):
+    """``(A^-1)[k, k]`` of the symmetric positive A whose Cholesky factor :func:`solve_sym`
+    left in the lower triangle of ``m[:npar, :npar]``: ``|L^-1 e_k|^2``, by forward
+    substitution (the variance factor of a least-squares fit's k-th coefficient); ``y``
+    (>= npar,) is scratch."""
+    y[k] = 1.0 / m[k, k]
+    total = y[k] * y[k]
+    for i in range(k + 1, npar):
+        s = 0.0
+        for j in range(k, i):
+            s -= m[i, j] * y[j]
+        y[i] = s / m[i, i]
+        total += y[i] * y[i]
+    return total
+
+
+@njit(cache=True)
 def ball_offset(points, k, x0, x1, x2, r2max, inv_r):
     """Offset of ``points[k]`` from (x0, x1, x2) in units of the radius, and its squared length:
     ``(inside, qx, qy, qz, r2)``. ``inside`` is False for a coincident point (the query point

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import Delaunay
 
-__all__ = ["Surface", "paraboloid", "monkey_saddle", "egg_crate", "saddle", "scan_terrain",
+__all__ = ["Surface", "paraboloid", "monkey_saddle", "egg_crate", "bump", "saddle", "scan_terrain",
            "sphere", "ellipsoid", "cylinder", "torus", "torus_at", "goursat_function",
            "goursat_at", "implicit_curvature", "project_to_implicit", "add_normal_noise",
            "orient_faces"]
@@ -110,11 +110,13 @@ def _monge(name, x, y, f, fx, fy, fxx, fxy, fyy, normal_sign, faces, border):
 
 
 def _xy_samples(extent, sampling, spacing, n, seed):
-    """Regular grid (with its faces) or uniform random points (Delaunay faces) on [-e, e]^2."""
+    """Regular grid (with its faces; ``spacing`` a number, or (along x, along y)) or uniform
+    random points (Delaunay faces) on [-e, e]^2."""
     if sampling == "regular":
-        t = np.linspace(-extent, extent, int(round(2 * extent / spacing)) + 1)
-        x, y = (a.ravel() for a in np.meshgrid(t, t, indexing="ij"))
-        faces = _grid_faces(len(t), len(t))
+        tx, ty = (np.linspace(-extent, extent, int(round(2 * extent / d)) + 1)
+                  for d in np.broadcast_to(np.asarray(spacing, dtype=np.float64), 2))
+        x, y = (a.ravel() for a in np.meshgrid(tx, ty, indexing="ij"))
+        faces = _grid_faces(len(tx), len(ty))
     elif sampling == "random":
         rng = np.random.default_rng(seed)
         x, y = rng.uniform(-extent, extent, (2, n))
@@ -157,6 +159,26 @@ def egg_crate(sampling="regular", amplitude=0.3, extent=3.0, spacing=0.05, n=200
     a = amplitude
     return _monge("egg_crate", x, y, a * sx * sy, a * cx * sy, a * sx * cy, -a * sx * sy,
                   a * cx * cy, -a * sx * sy, 1.0, faces, border)
+
+
+def bump(sampling="regular", amplitude=0.5, width=0.6, extent=2.0, spacing=0.04, n=20000,
+         seed=0):
+    """Gaussian bump z = amplitude exp(-(x^2 + y^2) / (2 width^2)) on [-extent, extent]^2,
+    upward normals: a cap (k1 = k2 = amplitude / width^2 on top), a ring of saddles and a flat
+    rim, curvature varying on the scale of ``width``. ``spacing`` (x, y) gives a grid finer
+    one way than the other (a scanner's lines).
+
+    Examples
+    --------
+    >>> s = bump(spacing=(0.5, 1.0))
+    >>> s.vertices.shape, round(float(s.k1[22]), 6), round(float(s.k2[22]), 6)   # the top
+    ((45, 3), 1.388889, 1.388889)
+    """
+    x, y, faces, border = _xy_samples(extent, sampling, spacing, n, seed)
+    w2 = width * width
+    g = amplitude * np.exp(-(x * x + y * y) / (2 * w2))
+    return _monge("bump", x, y, g, -x / w2 * g, -y / w2 * g, (x * x / w2 - 1) / w2 * g,
+                  x * y / (w2 * w2) * g, (y * y / w2 - 1) / w2 * g, 1.0, faces, border)
 
 
 def saddle(sampling="regular", a=0.25, extent=2.0, spacing=0.05, n=20000, seed=0):

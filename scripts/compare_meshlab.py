@@ -628,7 +628,9 @@ def _mesh_surfaces(size):
             # surfaces no constant was chosen on: curvature varying everywhere, saddles
             ("egg crate", S.egg_crate(), None, (0.0, 0.001)),
             ("egg crate, random", S.egg_crate("random", n=20000), None, (0.0,)),
-            ("saddle, random", S.saddle("random", n=20000), None, (0.0,))]
+            ("saddle, random", S.saddle("random", n=20000), None, (0.0,)),
+            # a grid 4 times finer one way (scan lines): 4 rows across a border ball
+            ("bump, grid 0.02 x 0.08", S.bump(spacing=(0.02, 0.08)), None, (0.0, 0.001))]
 
 
 def group_surfaces(methods, size, switches, timeout, **_):

@@ -23,7 +23,7 @@ def local_jet(x, n, neighbors, radius, point_weights=None):
     Returns
     -------
     normal : (3,) float, unit normal at x, on n's side, of the quartic's (cubic's) gradient
-        where the noise is low and the quadric's where it is high, mixed by
+        (the cubic's where its standard error is the smaller) where the noise is low and the quadric's where it is high, mixed by
         ``1 / (1 + (noise / (NOISE_SCALE radius))^4)``; n itself when a fit is singular or
         the normal would tilt by more than 30 degrees (the kernel's refined normal, in place
         or in its ``refined`` output)
@@ -50,13 +50,20 @@ def local_jet(x, n, neighbors, radius, point_weights=None):
     w[0] = 1.0
     lhs = design.T @ (w[:, None] * design)
     for npar in (15, 10):
-        if len(q) > npar and np.linalg.matrix_rank(lhs[:npar, :npar]) == npar:
+        if len(q) > npar and _solvable(lhs[:npar, :npar]):
             break
     else:
         return n, np.nan
     coef = np.linalg.solve(lhs[:npar, :npar], design[:, :npar].T @ (w * h))
     noise = np.sqrt(np.sum(w * (h - design[:, :npar] @ coef) ** 2) / w.sum() * len(q)
                     / (len(q) - npar))
+    if npar == 15 and _solvable(lhs[:10, :10]):
+        # the cubic's gradient where its standard error is the smaller
+        cubic = np.linalg.solve(lhs[:10, :10], design[:, :10].T @ (w * h))
+        se = [max(np.sum(w * (h - design[:, :p] @ c) ** 2), 0.0) / (len(q) - p)
+              * np.trace(np.linalg.inv(lhs[:p, :p])[3:5, 3:5]) for p, c in ((10, cubic), (15, coef))]
+        if se[0] < se[1]:
+            coef = np.concatenate([cubic, np.zeros(5)])
     quadric = np.linalg.solve(lhs[:6, :6], design[:, :6].T @ (w * h))
     clean = 1 / (1 + (noise / NOISE_SCALE) ** 4)
     gu, gv = quadric[3:5] + clean * (coef[3:5] - quadric[3:5])
@@ -64,3 +71,13 @@ def local_jet(x, n, neighbors, radius, point_weights=None):
         return n, noise * radius
     g = n - gu * tu - gv * tv
     return g / np.linalg.norm(g), noise * radius
+
+
+def _solvable(lhs):
+    """Whether the kernel's Cholesky solves the normal equations ``lhs``: every pivot above
+    1e-12 of its diagonal entry, and above 1e-12 (:func:`meshcurv.linalg.solve_sym`)."""
+    try:
+        pivots = np.diag(np.linalg.cholesky(lhs)) ** 2
+    except np.linalg.LinAlgError:
+        return False
+    return bool(np.all(pivots > 1e-12 * np.maximum(1.0, np.abs(np.diag(lhs)))))

@@ -28,6 +28,18 @@ def test_cholesky_solve_matches_numpy_and_refuses_singular_systems():
     assert not linalg.solve_sym(np.ones((3, 3)), np.ones(3), 3, np.empty(3))
 
 
+def test_inverse_entry_from_the_cholesky_factor_matches_numpy():
+    """(A^-1)[k, k] from the factor solve_sym leaves: numpy's inverse, every k."""
+    rng = np.random.default_rng(3)
+    b = rng.normal(size=(6, 6))
+    a = b @ b.T + 0.1 * np.eye(6)
+    m = a.copy()
+    assert linalg.solve_sym(m, np.ones(6), 6, np.empty(6))
+    expected = np.diag(np.linalg.inv(a))
+    got = [linalg.inverse_entry(m, 6, k, np.empty(6)) for k in range(6)]
+    np.testing.assert_allclose(got, expected, rtol=1e-10)
+
+
 def test_ball_offset_is_in_units_of_the_radius_and_excludes_the_centre():
     pts = np.array([[0.0, 0, 0], [0.5, 0, 0], [3.0, 0, 0]])
     assert not linalg.ball_offset(pts, 0, 0.0, 0.0, 0.0, 1.0, 1.0)[0]

@@ -15,7 +15,7 @@ from scipy.spatial import cKDTree
 from scipy.stats import chi2
 from tqdm.auto import tqdm
 
-from .fit import fused, jet, outliers
+from .fit import fused, jet, outliers, wrap
 from .fit.constants import NOISE_SCALE, TUKEY_C
 from .fit.extrapolate import BIAS_RATIO, extrapolate_to_zero
 from .neighbors import (MAX_BALL_FRACTION, BallGrid, KringWork, ball_counts, ball_grid,
@@ -49,6 +49,11 @@ MAX_PAIRS = 1e11
 
 # The direction of ``orientation="+z"``.
 _UP = np.array([0.0, 0.0, 1.0])
+# A row's ball reaches around the surface (status WRAPS_AROUND, no estimate) where the weight
+# of folding in it (:func:`meshcurv.fit.wrap.folding_weight`: neighbors on the far side and on
+# the bend to it) is at least two points, so that one stray point does not take its estimate.
+WRAP_POINTS = 2.0
+
 # Noise level (as a fraction of the radius) at which the bias correction is applied half.
 # The correction adds the smaller fit's noise, amplified: about 6 sigma / radius^2 in
 # curvature (measured: the two fits' difference on noisy spheres, where there is no bias, has
@@ -847,7 +852,7 @@ def _normal_field(nv, search, plan):
 
 
 def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2=0.0,
-               field_of_points=None, point_weights=None):
+               field_of_points=None, point_weights=None, side_normals=None):
     """Local jet (noise, refined normal) and the fused fits of one block, into ``out[pos]``;
     ``given_a2``: the noise variance of given normals (:func:`given_normal_noise`); with the
     normals of ``search.points`` (see :func:`_normal_field`), normal-aware fits;
@@ -858,7 +863,9 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2
     mean |dk1| 0.0015 -> 0.0021 at full weight); where there is noise they average it over a
     second neighborhood. Their rows' weight is scaled by ``1 - beta`` (beta the noise blend of
     the weights, 1 on clean data); given normals keep theirs, unless they are refined like
-    estimated ones (``refine_normals=True``: e.g. a tiled run's spanning-tree normals)."""
+    estimated ones (``refine_normals=True``: e.g. a tiled run's spanning-tree normals).
+    ``side_normals`` (per row of ``search.points``): the normals that tell where a ball
+    reaches around the surface (:data:`WRAP_POINTS`); None: not checked."""
     b = len(xb)
     if plan.normals == "given" and not plan.refine:
         qb, off = _off_surface(search, xb, qb, indptr, indices, radius, point_weights)
@@ -915,6 +922,14 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2
                                          (k1, k2, d1, d2), bias_gain,
                                          constraints + (point_weights,),
                                          samples, quadric, row_weight, taper)
+    if side_normals is not None:
+        # the circle fits take the ball for a patch seen from its tangent plane
+        wraps = wrap.folding_weight(search.points, side_normals, xb, qb, indptr, indices,
+                                    radius, point_weights) >= WRAP_POINTS
+        if wraps.any():
+            for a in (k1, k2, d1, d2, residual):
+                a[wraps] = np.nan
+            status[wraps] = Status.WRAPS_AROUND
     out.k1[pos], out.k2[pos], out.d1[pos], out.d2[pos] = k1, k2, d1, d2
     out.normals[pos], out.n_samples[pos], out.residual[pos] = qb, samples, residual
     out.n_neighbors[pos], out.noise[pos], out.status[pos] = nbrs, noise, status
@@ -1081,16 +1096,20 @@ def run_radii(v, f, given_normals, radii, query, plan, progress=False):
     # queries by grid cell for ball queries (the points a block touches then stay in cache);
     # as given for k-rings, whose memory accesses follow the mesh's own numbering
     order = len(query) if plan.use_kring else spatial_order(v[query], max(radii))
+    # the folding test's normals: a mesh's face normals (local, where a wide ball's plane
+    # fits may be anything), else the fits' field
+    sides = [sc.field if sc.face_normals is None else _by_row(sc.face_normals, sc.search)
+             for sc in scales]
     for pos in blocks(order, progress, "curvature", block):
         idx = query[pos]
         xb = v[idx]
         lists = None if plan.use_kring else shared.neighbors(idx)
-        for out, sc in zip(outs, scales):
+        for out, sc, side in zip(outs, scales, sides):
             indptr, indices = sc.search.neighbors(idx) if plan.use_kring else lists
             qb = _block_normals(sc.block_normals, sc.face_normals, idx, xb, indptr, indices,
                                 sc.radius, sc.search, plan, sc.weights, sc.face_weight)
             _fit_block(out, pos, xb, qb, indptr, indices, sc.radius, sc.search, plan,
-                       sc.given_a2, sc.field, sc.weights)
+                       sc.given_a2, sc.field, sc.weights, side)
             del indptr, indices
         del lists
     results = []

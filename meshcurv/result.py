@@ -38,6 +38,10 @@ class Status(IntEnum):
     - ``OUTLIER`` (8): the point lies further from the robust fit of its neighborhood than
       the noise explains (``outlier_score`` above 4.685: a spike or stray point); it was left
       out of its neighbors' fits and gets no curvature of its own.
+    - ``WRAPS_AROUND`` (9): the ball reaches a third of the way around the surface: it holds
+      points on the far side of a tube or sphere narrower than it, or across a thin sheet,
+      whose normals turn by more than 120 degrees (:mod:`meshcurv.fit.wrap`); a smaller radius
+      gives an estimate.
     """
 
     OK = constants.STATUS_OK
@@ -49,6 +53,7 @@ class Status(IntEnum):
     DEGENERATE_DIRECTIONS = constants.STATUS_DEGENERATE_DIRECTIONS
     OUT_OF_RANGE = constants.STATUS_OUT_OF_RANGE
     OUTLIER = constants.STATUS_OUTLIER
+    WRAPS_AROUND = constants.STATUS_WRAPS_AROUND
 
 
 @dataclass

@@ -30,7 +30,8 @@ PLANE_OFFSET = 0.25
 MIN_DIRECTION_SPREAD = 3e-3
 
 # Why a vertex has no estimate: the codes of :class:`meshcurv.result.Status` (int8, documented
-# there), set by the fused kernel (OUT_OF_RANGE by meshcurv.api after a rescaled run).
+# there), set by the fused kernel (OUT_OF_RANGE by meshcurv.api after a rescaled run, OUTLIER
+# and WRAPS_AROUND by meshcurv.pipeline).
 STATUS_OK = 0
 STATUS_NO_POSITION = 1
 STATUS_NO_NORMAL = 2
@@ -40,6 +41,7 @@ STATUS_ILL_POSED_FIT = 5
 STATUS_DEGENERATE_DIRECTIONS = 6
 STATUS_OUT_OF_RANGE = 7
 STATUS_OUTLIER = 8
+STATUS_WRAPS_AROUND = 9
 
 # Tukey biweight of the point-outlier pass (:mod:`meshcurv.fit.outliers`): a point whose
 # residual from its neighborhood's robust cubic fit exceeds TUKEY_C robust scales gets weight 0

@@ -74,7 +74,8 @@ def compute_curvature_cga_per_vertex(self, radius=None, ndirections=8, neighborh
       fields clamped at the ``clamp`` / 100 - ``clamp`` percentiles); grey where there is no
       estimate
     * custom scalar attributes ``k1, k2, mean, gaussian, shape_index, curvedness`` (NaN where
-      there is no estimate) and ``valid`` (1 or 0)
+      there is no estimate), ``valid`` (1 or 0), ``status``, ``outlier_score``, ``radius_used``
+      and ``mls_share`` (:data:`meshcurv.result.CURVATURE_FIELDS`)
     * custom point attributes ``d1, d2``: unit principal directions (NaN where invalid)
 
     ``ms.save_current_mesh`` writes only quality and colour of these; save them all with
@@ -201,6 +202,8 @@ def _store_result(ms, res, fields, quality, cmap, clamp):
     store_scalar(ms, "status", res.status.astype(np.float64))
     store_scalar(ms, "outlier_score", res.outlier_score)
     store_scalar(ms, "radius_used", res.radius_used)
+    store_scalar(ms, "mls_share", np.zeros(len(res.k1)) if res.mls_share is None else
+                 res.mls_share)
     store_point(ms, "d1", res.d1)
     store_point(ms, "d2", res.d2)
     # quality: NaN would break MeshLab's ramps and statistics, so invalid vertices read 0

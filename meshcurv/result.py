@@ -13,7 +13,7 @@ __all__ = ["CurvatureResult", "Status", "CURVATURE_FIELDS", "curvature_fields", 
 
 # Per-vertex curvature fields of every annotated file (PLY properties, LAS extra bytes).
 CURVATURE_FIELDS = shape.FIELDS + ("valid", "status", "d1x", "d1y", "d1z", "d2x", "d2y", "d2z",
-                                   "outlier_score", "radius_used")
+                                   "outlier_score", "radius_used", "mls_share")
 
 
 class Status(IntEnum):
@@ -142,7 +142,9 @@ def curvature_fields(result):
     ``{name: (n,) array}``: float64, ``valid`` uint8 (1 = estimated), ``status`` uint8
     (:class:`Status`), ``d1x .. d2z`` the components of the principal directions,
     ``outlier_score`` float64 (NaN where not computed), ``radius_used`` float64 (model units,
-    NaN where not valid; ``radius`` where valid if the result does not tell)."""
+    NaN where not valid; ``radius`` where valid if the result does not tell), ``mls_share``
+    float64 in [0, 1] (the MLS surface's share of the row's curvature; 0 where no blend
+    ran)."""
     out = {f: np.asarray(getattr(result, f), dtype=np.float64) for f in shape.FIELDS}
     out["valid"] = np.asarray(result.valid, dtype=np.uint8)
     out["status"] = np.asarray(result.status, dtype=np.uint8)
@@ -156,6 +158,9 @@ def curvature_fields(result):
     used = result.radius_used
     out["radius_used"] = (np.where(out["valid"] == 1, float(result.radius), np.nan)
                           if used is None else np.asarray(used, dtype=np.float64))
+    share = result.mls_share
+    out["mls_share"] = (np.zeros(len(result.k1)) if share is None else
+                        np.asarray(share, dtype=np.float64))
     return out
 
 

@@ -53,6 +53,21 @@ def test_annotated_ply_fields_are_bit_identical_to_api_arrays(tmp_path, torus, t
         np.testing.assert_array_equal(back.fields[name], getattr(res, name))
 
 
+def test_the_mls_share_is_a_field_and_0_where_no_blend_ran(tmp_path, torus, torus_result):
+    """The 64 x 24 torus takes the MLS blend (shares up to ~1): the file holds the result's
+    shares bit for bit; a noisy one keeps its circle fits (result None): zeros."""
+    assert torus_result.mls_share is not None and torus_result.mls_share.max() > 0.99
+    noisy = surfaces.add_normal_noise(torus, 0.003, seed=2)
+    plain = meshcurv.principal_curvatures(noisy.vertices, noisy.faces, radius=0.3)
+    assert plain.mls_share is None
+    for res, expected in ((torus_result, torus_result.mls_share),
+                          (plain, np.zeros(len(torus.vertices)))):
+        out = tmp_path / "s.ply"
+        io.write_annotated(str(out), io.MeshData(torus.vertices, torus.faces), res)
+        got = PlyData.read(str(out))["vertex"].data[io.ply_property("mls_share")]
+        assert got.tobytes() == np.ascontiguousarray(expected, dtype="<f8").tobytes()
+
+
 def test_point_cloud_ply_has_no_faces_and_keeps_extra_fields(tmp_path):
     pts = np.random.default_rng(1).normal(size=(200, 3))
     src = tmp_path / "cloud.ply"

@@ -35,7 +35,8 @@ def save_curvature_mesh(ms, path):
     ``scalar_k1 scalar_k2 scalar_mean scalar_gaussian scalar_shape_index scalar_curvedness``
     (float64, NaN where invalid), ``scalar_valid`` (uint8), ``scalar_d1x .. scalar_d2z``
     (float64), ``scalar_status`` (uint8), ``scalar_outlier_score``, ``scalar_radius_used``
-    (float64, model units) and ``scalar_mls_share`` when the mesh has them, ``scalar_n_neighbors scalar_n_samples scalar_residual`` when the mesh has them
+    (float64, model units) and ``scalar_mls_share`` when the mesh has them,
+    ``scalar_n_neighbors scalar_n_samples scalar_residual`` when the mesh has them
     (a mesh read by :func:`load_curvature_mesh`), the vertex quality as ``quality`` and the
     vertex colour as ``red green blue``. Values are written bit for bit. Textures, face
     attributes and other custom attributes are not written (use ``ms.save_current_mesh`` for

@@ -39,9 +39,10 @@ class Status(IntEnum):
       the noise explains (``outlier_score`` above 4.685: a spike or stray point); it was left
       out of its neighbors' fits and gets no curvature of its own.
     - ``WRAPS_AROUND`` (9): the ball reaches a third of the way around the surface: it holds
-      points on the far side of a tube or sphere narrower than it, or across a thin sheet,
-      whose normals turn by more than 120 degrees (:mod:`meshcurv.fit.wrap`); a smaller radius
-      gives an estimate.
+      points on the far side of a tube or sphere narrower than it, whose normals turn by more
+      than 120 degrees, and the surface bending around to them (:mod:`meshcurv.fit.wrap`; not
+      the other side of a thin sheet, which the fits handle); a smaller radius gives an
+      estimate.
     """
 
     OK = constants.STATUS_OK

@@ -11,10 +11,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import Delaunay
 
-__all__ = ["Surface", "paraboloid", "monkey_saddle", "egg_crate", "bump", "saddle", "scan_terrain",
-           "sphere", "ellipsoid", "cylinder", "torus", "torus_at", "goursat_function",
-           "goursat_at", "implicit_curvature", "project_to_implicit", "add_normal_noise",
-           "orient_faces"]
+__all__ = ["Surface", "paraboloid", "monkey_saddle", "egg_crate", "bump", "saddle",
+           "scan_terrain", "sphere", "ellipsoid", "cylinder", "torus", "torus_at",
+           "goursat_function", "goursat_at", "implicit_curvature", "project_to_implicit",
+           "add_normal_noise", "orient_faces"]
 
 
 @dataclass

@@ -50,19 +50,21 @@ def local_jet(points, query_points, normals, indptr, indices, radius, refine, no
     With ``refine`` the normal ``n - g_u tu - g_v tv`` (normalised) of a fitted gradient
     (g_u, g_v) at x replaces n: face and PCA normals tilt with irregular sampling (0.7 degrees
     on a randomly sampled sphere at ~100 neighbors). The gradient is the quartic's (cubic's)
-    where the data are clean - the cubic's where its standard error (the fit's residual
-    variance times the gradient's variance factor) is the smaller than the quartic's: where
-    the ball holds 4 rows of a grid across, a quartic in u on 4 values is a cubic, and only
-    the surface's bending tells u^4 from the lower terms (a Cholesky pivot of ~1e-9 of its
-    diagonal entry); its coefficient then takes up the shape's fifth-order terms
-    magnified, and the quartic's normals turned by up to 29 degrees (a Gaussian bump sampled
-    0.02 x 0.08 at radius 0.22, a row from the border; MLS passes fed by them: mean |dk|
-    0.0051 against 0.0003 from exact normals), where the cubic's are 0.002 degrees off and the quadric's (6 coefficients) under noise, mixed by
+    where the data are clean and the quadric's (6 coefficients) under noise, mixed by
     ``c = 1 / (1 + (noise / (NOISE_SCALE radius))^4)`` (the mix of ``weighting="auto"``):
     the quadric's gradient has a third to a fifth of the quartic's variance under noise, but
     where the sampling is uneven it takes up the surface's third-order terms (randomly
     sampled ellipsoid at radius 0.3: the quadric's normals tilt by a median of 0.34 degrees,
     the quartic's by 0.01, mean |dk| 0.0103 -> 0.0033). The refined normal stays on n's side.
+
+    The quartic's gradient gives way to the cubic's where the cubic's standard error (each
+    fit's residual variance times its gradient's variance factor) is the smaller. Where a
+    ball holds 4 rows of a grid across, a quartic in u on 4 values is a cubic, and only the
+    surface's bending tells u^4 from the lower terms (a Cholesky pivot of ~1e-9 of its
+    diagonal entry): its coefficient took up the shape's fifth-order terms magnified and the
+    quartic's normals turned by up to 29 degrees (a Gaussian bump sampled 0.02 x 0.08 at
+    radius 0.22, a row from the border; MLS passes fed by them: mean |dk| 0.0051, 0.0003 from
+    exact normals), where the cubic's are 0.002 degrees off.
 
     Parameters
     ----------

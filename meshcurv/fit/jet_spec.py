@@ -23,7 +23,8 @@ def local_jet(x, n, neighbors, radius, point_weights=None):
     Returns
     -------
     normal : (3,) float, unit normal at x, on n's side, of the quartic's (cubic's) gradient
-        (the cubic's where its standard error is the smaller) where the noise is low and the quadric's where it is high, mixed by
+        (the cubic's where its standard error is the smaller) where the noise is low and the
+        quadric's where it is high, mixed by
         ``1 / (1 + (noise / (NOISE_SCALE radius))^4)``; n itself when a fit is singular or
         the normal would tilt by more than 30 degrees (the kernel's refined normal, in place
         or in its ``refined`` output)
@@ -61,7 +62,8 @@ def local_jet(x, n, neighbors, radius, point_weights=None):
         # the cubic's gradient where its standard error is the smaller
         cubic = np.linalg.solve(lhs[:10, :10], design[:, :10].T @ (w * h))
         se = [max(np.sum(w * (h - design[:, :p] @ c) ** 2), 0.0) / (len(q) - p)
-              * np.trace(np.linalg.inv(lhs[:p, :p])[3:5, 3:5]) for p, c in ((10, cubic), (15, coef))]
+              * np.trace(np.linalg.inv(lhs[:p, :p])[3:5, 3:5])
+              for p, c in ((10, cubic), (15, coef))]
         if se[0] < se[1]:
             coef = np.concatenate([cubic, np.zeros(5)])
     quadric = np.linalg.solve(lhs[:6, :6], design[:, :6].T @ (w * h))

@@ -1,4 +1,4 @@
-"""Numpy specification of :mod:`meshcurv.fit.wrap`: the far side of one neighborhood."""
+"""Numpy specification of :mod:`meshcurv.fit.wrap`: the folding in one neighborhood."""
 
 import numpy as np
 
@@ -22,7 +22,8 @@ def folding_weight(x, n, neighbors, neighbor_normals, radius, point_weights=None
     with np.errstate(invalid="ignore"):
         cos = a @ n
         inside = np.einsum("ij,ij->i", d, d) <= radius * radius
-        across = np.abs(np.einsum("ij,ij->i", d, a)) > np.sin(TURN / 2) * np.linalg.norm(d, axis=1)
+        across = (np.abs(np.einsum("ij,ij->i", d, a))
+                  > np.sin(TURN / 2) * np.linalg.norm(d, axis=1))
         far = inside & (cos < np.cos(TURN)) & across
         bend = inside & (cos >= np.cos(TURN)) & (cos < -np.cos(TURN))
     return float(min(np.sum(w[far]), np.sum(w[bend])))

@@ -186,7 +186,10 @@ def crowd_thinning(grid, fine=CROWD_FINE, factor=CROWD_FACTOR):
     if not crowded.any():
         return None
     rows = np.flatnonzero(crowded)
-    keys = np.floor(grid.sorted_points[rows] * (fine / grid.cell)).astype(np.int64)
+    # coordinates beyond 2^63 small cells (a cloud near float64's limits) cast to one key: such
+    # a crowd is thinned as one small cell (fewer of its points serve; each is still estimated)
+    with np.errstate(invalid="ignore", over="ignore"):
+        keys = np.floor(grid.sorted_points[rows] * (fine / grid.cell)).astype(np.int64)
     _, cell, size = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
     cell = cell.ravel()
     # each point's rank within its small cell, in grid order

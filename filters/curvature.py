@@ -13,6 +13,7 @@ import pymeshlab
 from meshcurv import principal_curvatures, shape
 from meshcurv.io import bbox_diagonal, usable_normals
 from meshcurv.options import check_options
+from meshcurv.result import mls_shares
 
 from .attributes import store_point, store_scalar
 
@@ -202,8 +203,7 @@ def _store_result(ms, res, fields, quality, cmap, clamp):
     store_scalar(ms, "status", res.status.astype(np.float64))
     store_scalar(ms, "outlier_score", res.outlier_score)
     store_scalar(ms, "radius_used", res.radius_used)
-    store_scalar(ms, "mls_share", np.zeros(len(res.k1)) if res.mls_share is None else
-                 res.mls_share)
+    store_scalar(ms, "mls_share", mls_shares(res))
     store_point(ms, "d1", res.d1)
     store_point(ms, "d2", res.d2)
     # quality: NaN would break MeshLab's ramps and statistics, so invalid vertices read 0

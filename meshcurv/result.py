@@ -9,7 +9,8 @@ import numpy as np
 from . import shape
 from .fit import constants
 
-__all__ = ["CurvatureResult", "Status", "CURVATURE_FIELDS", "curvature_fields", "oriented_like"]
+__all__ = ["CurvatureResult", "Status", "CURVATURE_FIELDS", "curvature_fields", "mls_shares",
+           "oriented_like"]
 
 # Per-vertex curvature fields of every annotated file (PLY properties, LAS extra bytes).
 CURVATURE_FIELDS = shape.FIELDS + ("valid", "status", "d1x", "d1y", "d1z", "d2x", "d2y", "d2z",
@@ -159,10 +160,15 @@ def curvature_fields(result):
     used = result.radius_used
     out["radius_used"] = (np.where(out["valid"] == 1, float(result.radius), np.nan)
                           if used is None else np.asarray(used, dtype=np.float64))
-    share = result.mls_share
-    out["mls_share"] = (np.zeros(len(result.k1)) if share is None else
-                        np.asarray(share, dtype=np.float64))
+    out["mls_share"] = mls_shares(result)
     return out
+
+
+def mls_shares(result):
+    """``result.mls_share`` as float64 (n,), 0 where no blend ran (``mls_share`` None): the
+    field of every annotated file and of the pymeshlab filter."""
+    share = result.mls_share
+    return np.zeros(len(result.k1)) if share is None else np.asarray(share, dtype=np.float64)
 
 
 def oriented_like(result, normals):

@@ -9,7 +9,7 @@ pymeshlab = pytest.importorskip("pymeshlab")
 
 import meshcurv  # noqa: E402
 import meshcurv.filters  # noqa: E402,F401  (registers the filter on MeshSet)
-from meshcurv import io, shape, surfaces  # noqa: E402
+from meshcurv import io, result, shape, surfaces  # noqa: E402
 
 FIELDS = shape.FIELDS
 
@@ -53,6 +53,10 @@ def _check_against_api(ms, res, quality, summary, vertices, faces):
     for name in FIELDS:
         _assert_same(m.vertex_custom_scalar_attribute_array(name), getattr(res, name))
     _assert_same(m.vertex_custom_scalar_attribute_array("valid"), res.valid.astype(float))
+    _assert_same(m.vertex_custom_scalar_attribute_array("status"), res.status.astype(float))
+    for name in ("outlier_score", "radius_used"):
+        _assert_same(m.vertex_custom_scalar_attribute_array(name), getattr(res, name))
+    _assert_same(m.vertex_custom_scalar_attribute_array("mls_share"), result.mls_shares(res))
     _assert_same(m.vertex_custom_point_attribute_matrix("d1"), res.d1)
     _assert_same(m.vertex_custom_point_attribute_matrix("d2"), res.d2)
     # colour: the ramp over the field (same tables as shape.colorize; MeshLab rounds to bytes)

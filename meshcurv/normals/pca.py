@@ -140,6 +140,34 @@ def plane_agreement(points, query_points, normals, indptr, indices, radius, flat
     return out
 
 
+@njit(parallel=True, cache=True)
+def ball_flatness(points, query_points, indptr, indices, radius, point_weights=None):
+    """The flatness (m,) of each query point's ball: the smallest eigenvalue of the
+    covariance of its points (the query point's and its neighbors' within ``radius``, weighted
+    as in :func:`pca_normals_csr`) over the middle one. 0 for a flat patch; a spherical cap
+    whose rim lies at angle T from its centre, evenly sampled, gives ``(1 - cos T) / (2 (2 +
+    cos T))`` (1/4 at 90 degrees, 1/2 at 120); near 1 for a ball holding a tube's whole
+    section or a blob. NaN where the plane fit has none (fewer than 3 points, a covariance
+    that is not finite) or the middle eigenvalue is 0 (one line of points)."""
+    m = query_points.shape[0]
+    out = np.full(m, np.nan)
+    r2max = radius * radius
+    inv_r = 1.0 / radius
+    nchunks = (m + CHUNK - 1) // CHUNK
+    for ch in prange(nchunks):
+        cov = np.empty((3, 3))
+        nrm = np.empty(3)
+        for q in range(ch * CHUNK, min(m, (ch + 1) * CHUNK)):
+            if not _plane_normal(points, indices, indptr[q], indptr[q + 1], query_points[q, 0],
+                                 query_points[q, 1], query_points[q, 2], r2max, inv_r,
+                                 point_weights, cov, nrm):
+                continue
+            l1, l2, _ = _sorted_eigenvalues(cov)
+            if l2 > 0.0:
+                out[q] = max(l1, 0.0) / l2
+    return out
+
+
 # Terms of the height models of :func:`split_disagreement` in the ball's tangent frame (u, v):
 # the whole ball's quadric (u, v, 1, u^2, u v, v^2) and each half's plane (the first three).
 _QUADRIC_TERMS = 6

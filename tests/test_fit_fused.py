@@ -3,17 +3,11 @@
 
 import numpy as np
 import pytest
-from scipy.spatial import cKDTree
 
 from meshcurv import surfaces
 from meshcurv.fit import fused, fused_spec
 
-
-def sorted_ball_csr(points, radius):
-    tree = cKDTree(points)
-    lists = [sorted(tree.query_ball_point(p, radius)) for p in points]
-    indptr = np.concatenate([[0], np.cumsum([len(lst) for lst in lists])]).astype(np.int64)
-    return indptr, np.concatenate(lists).astype(np.int64)
+from neighbor_lists import ball_csr
 
 
 @pytest.mark.parametrize("options", [
@@ -31,7 +25,7 @@ def test_kernel_matches_numpy_reference(options):
     s = surfaces.torus(n_major=100, n_minor=30)
     v = s.vertices + rng.normal(scale=0.01, size=s.vertices.shape)
     radius = 0.45
-    indptr, indices = sorted_ball_csr(v, radius)
+    indptr, indices = ball_csr(v, radius)
     m = len(v)
     out = dict(k1=np.empty(m), k2=np.empty(m), d1=np.empty((m, 3)), d2=np.empty((m, 3)),
                n_samples=np.empty(m), residual=np.empty(m), n_neighbors=np.empty(m),

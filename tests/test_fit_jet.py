@@ -3,23 +3,17 @@
 
 import numpy as np
 import pytest
-from scipy.spatial import cKDTree
 
 from meshcurv import surfaces
 from meshcurv.fit import jet, jet_spec
 
-
-def sorted_ball_csr(points, radius):
-    tree = cKDTree(points)
-    lists = [sorted(tree.query_ball_point(p, radius)) for p in points]
-    indptr = np.concatenate([[0], np.cumsum([len(lst) for lst in lists])]).astype(np.int64)
-    return indptr, np.concatenate(lists).astype(np.int64)
+from neighbor_lists import ball_csr
 
 
 def refined_as_specified(v, start, radius, every):
     """The kernel's refined normals and noise from ``start`` over balls of ``radius``, checked
     against the numpy specification at every ``every``-th point."""
-    indptr, indices = sorted_ball_csr(v, radius)
+    indptr, indices = ball_csr(v, radius)
     refined, noise = start.copy(), np.empty(len(v))
     jet.local_jet(v, v, refined, indptr, indices, radius, True, noise)
     for i in range(0, len(v), every):
@@ -74,7 +68,7 @@ def test_a_grid_with_four_rows_across_the_ball_takes_the_cubic_gradient():
     s = surfaces.bump(spacing=(0.02, 0.08))
     radius = 0.22
     band = np.flatnonzero((s.border_distance > 0.05) & (s.border_distance < 0.1))
-    indptr, indices = sorted_ball_csr(s.vertices, radius)
+    indptr, indices = ball_csr(s.vertices, radius)
     refined, noise = s.normals.copy(), np.empty(len(s.vertices))
     jet.local_jet(s.vertices, s.vertices, refined, indptr, indices, radius, True, noise)
     tilt = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", refined, s.normals), -1, 1)))

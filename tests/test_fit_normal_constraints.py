@@ -4,23 +4,17 @@ noise with exact normals far more accurate than positions alone."""
 
 import numpy as np
 import pytest
-from scipy.spatial import cKDTree
 
 import meshcurv
 from meshcurv import surfaces
 from meshcurv.fit import fused, fused_spec
 
-
-def sorted_ball_csr(points, radius):
-    tree = cKDTree(points)
-    lists = [sorted(tree.query_ball_point(p, radius)) for p in points]
-    indptr = np.concatenate([[0], np.cumsum([len(lst) for lst in lists])]).astype(np.int64)
-    return indptr, np.concatenate(lists).astype(np.int64)
+from neighbor_lists import ball_csr
 
 
 def run_kernel(v, normals, radius, point_normals, fit=(8, 0.25, 3.0, 0.25, False, True, False,
                                                        True), blend=1.0, noise=0.0, gain=1.0):
-    indptr, indices = sorted_ball_csr(v, radius)
+    indptr, indices = ball_csr(v, radius)
     m = len(v)
     out = dict(k1=np.empty(m), k2=np.empty(m), d1=np.empty((m, 3)), d2=np.empty((m, 3)),
                n_samples=np.empty(m), residual=np.empty(m), n_neighbors=np.empty(m),
@@ -86,7 +80,7 @@ def test_row_weights_are_reported_and_taken_as_given():
     m, radius = len(v), 0.45
     fit = (8, 0.25, 3.0, 0.25, False, True, False, True)
     noise, gain = np.full(m, 0.002), np.full(m, 0.8)
-    indptr, indices = sorted_ball_csr(v, radius)
+    indptr, indices = ball_csr(v, radius)
     weights = []
     for r, given in ((radius, np.full(m, np.nan)), (radius / np.sqrt(2), None)):
         w = given if given is not None else weights[0].copy()

@@ -4,7 +4,6 @@ and flagged; clean surfaces lose nothing."""
 
 import numpy as np
 import pytest
-from scipy.spatial import cKDTree
 
 import meshcurv
 from meshcurv import surfaces
@@ -13,12 +12,7 @@ from meshcurv.fit.constants import OUTLIER_TRUSTED, TUKEY_C
 from meshcurv.normals import pca_normals
 from meshcurv.result import CURVATURE_FIELDS, Status, curvature_fields
 
-
-def ball_csr(points, radius):
-    tree = cKDTree(points)
-    lists = [sorted(tree.query_ball_point(p, radius)) for p in points]
-    indptr = np.concatenate([[0], np.cumsum([len(lst) for lst in lists])]).astype(np.int64)
-    return indptr, np.concatenate(lists).astype(np.int64)
+from neighbor_lists import ball_csr
 
 
 def with_spikes(surface, noise, fraction, seed):

@@ -3,19 +3,13 @@ results, bit for bit, as a pass per output."""
 
 import numpy as np
 import pytest
-from scipy.spatial import cKDTree
 
 from meshcurv import surfaces
 from meshcurv.fit import jet
 
+from neighbor_lists import ball_csr
+
 RADIUS = 0.45
-
-
-def sorted_ball_csr(points, radius):
-    tree = cKDTree(points)
-    lists = [sorted(tree.query_ball_point(p, radius)) for p in points]
-    indptr = np.concatenate([[0], np.cumsum([len(lst) for lst in lists])]).astype(np.int64)
-    return indptr, np.concatenate(lists).astype(np.int64)
 
 
 @pytest.fixture(scope="module")
@@ -25,7 +19,7 @@ def noisy_torus():
     v = s.vertices + rng.normal(scale=0.01, size=s.vertices.shape)
     normals = s.normals.copy()
     normals[::50] = np.nan                       # rows without a normal: no estimate
-    indptr, indices = sorted_ball_csr(v, RADIUS)
+    indptr, indices = ball_csr(v, RADIUS)
     return rng, s, v, normals, indptr, indices
 
 

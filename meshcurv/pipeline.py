@@ -931,16 +931,17 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2
                                          (k1, k2, d1, d2), bias_gain,
                                          constraints + (point_weights,),
                                          samples, quadric, row_weight, taper)
+    # the circle fits take the ball for a patch seen from its tangent plane
+    wraps = np.zeros(b, dtype=bool)
     if side_normals is not None:
-        # the circle fits take the ball for a patch seen from its tangent plane
         wraps = wrap.folding_weight(search.points, side_normals, xb, qb, indptr, indices,
                                     radius, point_weights) >= WRAP_POINTS
-        if side_flatness:
-            wraps |= beyond_a_cap(search.points, xb, indptr, indices, radius, point_weights)
-        if wraps.any():
-            for a in (k1, k2, d1, d2, residual):
-                a[wraps] = np.nan
-            status[wraps] = Status.WRAPS_AROUND
+    if side_flatness:
+        wraps |= beyond_a_cap(search.points, xb, indptr, indices, radius, point_weights)
+    if wraps.any():
+        for a in (k1, k2, d1, d2, residual):
+            a[wraps] = np.nan
+        status[wraps] = Status.WRAPS_AROUND
     out.k1[pos], out.k2[pos], out.d1[pos], out.d2[pos] = k1, k2, d1, d2
     out.normals[pos], out.n_samples[pos], out.residual[pos] = qb, samples, residual
     out.n_neighbors[pos], out.noise[pos], out.status[pos] = nbrs, noise, status
@@ -1395,6 +1396,9 @@ def _refit(v, idx, nv, face_normals, r, search, plan, own_normals, trusted=None,
     spanning-tree normals ``nv`` of the ``trusted`` vertices in the ball (see
     :func:`_reference_normals`; none where the ball holds none of them)."""
     sub = _Outputs(len(idx))
+    # the folding test's normals (:func:`_fit_block`), as the call's: a mesh's faces', else
+    # the given or spanning-tree ones, plane fits' over these balls being what it doubts
+    side = _by_row(face_normals if face_normals is not None else nv, search)
     for pos in blocks(len(idx), False, "", block_size(search, idx, r, "points")):
         xb = v[idx[pos]]
         indptr, indices = search.neighbors(idx[pos])
@@ -1408,7 +1412,9 @@ def _refit(v, idx, nv, face_normals, r, search, plan, own_normals, trusted=None,
         else:
             qb = _block_normals(nv, face_normals, idx[pos], xb, indptr, indices, r, search,
                                 plan, face_weight=face_weight)
-        _fit_block(sub, pos, xb, qb, indptr, indices, r, search, plan)
+        _fit_block(sub, pos, xb, qb, indptr, indices, r, search, plan, side_normals=side,
+                   side_flatness=face_normals is None and (plan.normals != "given"
+                                                           or plan.refine))
     return sub
 
 
@@ -1429,9 +1435,10 @@ def retry_sparse(out, v, f, nv, face_normals, radius, query, plan, search, face_
     in each half-set, and the circle through x and one point p centred on the normal line is
     the classic ``2 h / |p - x|^2`` estimate of the normal curvature towards p (exact on
     spheres), 5 or more of them averaged by the Euler fit. ``search`` is the search of
-    ``radius``. Rows nothing serves keep their estimate, except on clouds with estimated
-    normals, where an estimate from fewer than 11 points has no checked normal and is dropped.
-    ``face_weight``: as in :func:`_block_normals`.
+    ``radius``. A wider ball reaching around the surface serves nothing (the folding test of
+    :func:`_fit_block`, with the call's normals). Rows nothing serves keep their estimate,
+    except on clouds with estimated normals, where an estimate from fewer than 11 points has
+    no checked normal and is dropped. ``face_weight``: as in :func:`_block_normals`.
     """
     rows = _needs_support(out, plan)
     if not len(rows):

@@ -101,3 +101,21 @@ def test_a_ball_of_noise_is_no_fold(sigma):
     s = surfaces.torus(3.0, 0.4, 300, 24)
     indptr, indices = ball_csr(s.vertices, 0.96, s.vertices[::50])
     assert beyond_a_cap(s.vertices, s.vertices[::50], indptr, indices, 0.96).all()
+
+
+def test_the_sparse_retrys_wider_balls_are_tested_too():
+    """A torus 3 / 0.08 of 300 x 8 points beside a plane 100 times denser, exact normals: the
+    default radius (0.056, the plane's) holds too few of the tube's points, and the retry's
+    first ball that holds enough, 3 times wider, holds the tube's whole section (2.1 times its
+    radius). Those rows were served from it (k1 4.6 % off, all valid); now the ball is folded
+    as at the call's own radius, and the rows keep the reason they had (TOO_FEW_NEIGHBORS)."""
+    t = surfaces.torus(3.0, 0.08, 300, 8)
+    x, y = np.meshgrid(np.linspace(10, 12, 201), np.linspace(0, 2, 201))
+    plane = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
+    v = np.vstack([t.vertices, plane])
+    n = np.vstack([t.normals, np.tile([0.0, 0.0, 1.0], (len(plane), 1))])
+    res = meshcurv.principal_curvatures(v, normals=n)
+    tube = slice(0, len(t.vertices))
+    assert res.radius == pytest.approx(0.0559, rel=0.01)
+    assert np.all(res.status[tube] == Status.TOO_FEW_NEIGHBORS)
+    assert res.valid[len(t.vertices):].all()

@@ -43,9 +43,9 @@ class Status(IntEnum):
       points on the far side of a tube or sphere narrower than it, whose normals turn by more
       than 120 degrees, and the surface bending around to them (:mod:`meshcurv.fit.wrap`; not
       the other side of a thin sheet, which the fits handle); on a cloud whose normals are
-      estimated, also where the ball's points are less flat than such a cap and flatten as
-      the ball shrinks (:func:`meshcurv.pipeline.beyond_a_cap`). A smaller radius gives an
-      estimate.
+      estimated, also where the ball's points are less flat than such a cap and, as the
+      ball shrinks, flatten like a surface or keep a round section as wide (a pole, a
+      branch; :func:`meshcurv.pipeline.beyond_a_cap`). A smaller radius gives an estimate.
     """
 
     OK = constants.STATUS_OK

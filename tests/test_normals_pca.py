@@ -178,19 +178,18 @@ def test_plane_agreement_equals_its_numpy_specification(weighted):
     assert np.isnan(got[1500:]).all()                    # blob and line: none
 
 
-def flatness_spec(points, query, indptr, indices, radius, weights=None):
-    """ball_flatness in numpy: the eigenvalues l1 <= l2 of the plane fit's covariance
-    (:func:`_ball_covariance`), l1 / l2; NaN with fewer than 3 points or l2 = 0."""
+def spread_spec(points, query, indptr, indices, radius, weights=None):
+    """ball_spread in numpy: the eigenvalues, ascending, of the plane fit's covariance
+    (:func:`_ball_covariance`, units of the radius squared); NaN rows with fewer than 3
+    points."""
     owner, _, _, used, cov = _ball_covariance(points, query, indptr, indices, radius, weights)
-    lam = np.linalg.eigvalsh(cov)
     enough = np.bincount(owner, used, minlength=len(query)) + 1 >= 3
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(enough & (lam[:, 1] > 0), np.maximum(lam[:, 0], 0) / lam[:, 1], np.nan)
+    return np.where(enough[:, None], np.linalg.eigvalsh(cov), np.nan)
 
 
 @pytest.mark.parametrize("weighted", [False, True])
-def test_ball_flatness_equals_its_numpy_specification(weighted):
-    from meshcurv.normals.pca import ball_flatness
+def test_ball_spread_equals_its_numpy_specification(weighted):
+    from meshcurv.normals.pca import ball_spread
 
     rng = np.random.default_rng(5)
     sheet = rng.uniform(-1, 1, (1500, 3)) * [1, 1, 0]
@@ -202,25 +201,27 @@ def test_ball_flatness_equals_its_numpy_specification(weighted):
     indptr, indices = ball_neighbors(ball_grid(points, 0.2), np.arange(len(points)), points,
                                      0.2)
     weights = rng.uniform(0, 1, len(points)) if weighted else None
-    got = ball_flatness(points, points, indptr, indices, 0.2, weights)
-    want = flatness_spec(points, points, indptr, indices, 0.2, weights)
+    got = ball_spread(points, points, indptr, indices, 0.2, weights)
+    want = spread_spec(points, points, indptr, indices, 0.2, weights)
     np.testing.assert_array_equal(np.isnan(got), np.isnan(want))
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
-    assert np.nanmax(got[:1500]) < 0.05 and np.nanmin(got[1500:1700]) > 0.3
-    assert np.isnan(got[-1])                                 # a lone point: no plane
+    with np.errstate(invalid="ignore"):                      # the lone point's NaN row
+        flat = got[:, 0] / got[:, 1]
+    assert np.nanmax(flat[:1500]) < 0.05 and np.nanmin(flat[1500:1700]) > 0.3
+    assert np.isnan(got[-1]).all()                           # a lone point: no plane
 
 
 @pytest.mark.parametrize("reach, expected", [(90, 0.25), (120, 0.5)])
-def test_ball_flatness_of_a_spherical_cap(reach, expected):
+def test_flatness_of_a_spherical_cap(reach, expected):
     """A unit sphere evenly sampled (200k random points) in the ball about a point whose rim
-    lies ``reach`` degrees around: (1 - cos T) / (2 (2 + cos T)), within the sampling's
-    scatter (a few thousand points in the ball: ~2 %)."""
-    from meshcurv.normals.pca import ball_flatness
+    lies ``reach`` degrees around: smallest over middle eigenvalue (1 - cos T) / (2 (2 +
+    cos T)), within the sampling's scatter (a few thousand points in the ball: ~2 %)."""
+    from meshcurv.normals.pca import ball_spread
 
     p = np.random.default_rng(6).normal(size=(200_000, 3))
     p /= np.linalg.norm(p, axis=1, keepdims=True)
     radius = 2.0 * np.sin(np.radians(reach) / 2.0)
     x = np.array([[0.0, 0.0, 1.0]])
     inside = np.flatnonzero(np.linalg.norm(p - x, axis=1) <= radius)
-    got = ball_flatness(p, x, np.array([0, len(inside)]), inside, radius)
-    assert got[0] == pytest.approx(expected, rel=0.03)
+    got = ball_spread(p, x, np.array([0, len(inside)]), inside, radius)
+    assert got[0, 0] / got[0, 1] == pytest.approx(expected, rel=0.03)

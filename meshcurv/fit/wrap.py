@@ -36,7 +36,7 @@ TURN = math.radians(120.0)
 
 _TURN_COS = math.cos(TURN)
 
-# The flatness (:func:`meshcurv.normals.pca.ball_flatness`) of an evenly sampled spherical cap
+# The flatness (:func:`meshcurv.normals.pca.ball_spread`) of an evenly sampled spherical cap
 # whose rim lies TURN around from its centre: (1 - cos T) / (2 (2 + cos T)) = 1/2. A ball
 # less flat than that reaches around more than the test above allows, whatever the normals say
 # (a tube's ball gets there at 1.9 times its radius).

@@ -141,16 +141,18 @@ def plane_agreement(points, query_points, normals, indptr, indices, radius, flat
 
 
 @njit(parallel=True, cache=True)
-def ball_flatness(points, query_points, indptr, indices, radius, point_weights=None):
-    """The flatness (m,) of each query point's ball: the smallest eigenvalue of the
-    covariance of its points (the query point's and its neighbors' within ``radius``, weighted
-    as in :func:`pca_normals_csr`) over the middle one. 0 for a flat patch; a spherical cap
-    whose rim lies at angle T from its centre, evenly sampled, gives ``(1 - cos T) / (2 (2 +
-    cos T))`` (1/4 at 90 degrees, 1/2 at 120); near 1 for a ball holding a tube's whole
-    section or a blob. NaN where the plane fit has none (fewer than 3 points, a covariance
-    that is not finite) or the middle eigenvalue is 0 (one line of points)."""
+def ball_spread(points, query_points, indptr, indices, radius, point_weights=None):
+    """The eigenvalues (m, 3), ascending, of the covariance of each query point's ball (the
+    query point and its neighbors within ``radius``, weighted as in
+    :func:`pca_normals_csr`), in units of ``radius`` squared; NaN rows where the plane fit has
+    none (fewer than 3 points, a covariance that is not finite).
+
+    The smallest over the middle one is the ball's flatness: 0 for a flat patch; a
+    spherical cap whose rim lies at angle T from its centre, evenly sampled, gives
+    ``(1 - cos T) / (2 (2 + cos T))`` (1/4 at 90 degrees, 1/2 at 120); near 1 for a ball
+    holding a tube's whole section, or a blob."""
     m = query_points.shape[0]
-    out = np.full(m, np.nan)
+    out = np.full((m, 3), np.nan)
     r2max = radius * radius
     inv_r = 1.0 / radius
     nchunks = (m + CHUNK - 1) // CHUNK
@@ -162,9 +164,10 @@ def ball_flatness(points, query_points, indptr, indices, radius, point_weights=N
                                  query_points[q, 1], query_points[q, 2], r2max, inv_r,
                                  point_weights, cov, nrm):
                 continue
-            l1, l2, _ = _sorted_eigenvalues(cov)
-            if l2 > 0.0:
-                out[q] = max(l1, 0.0) / l2
+            l1, l2, l3 = _sorted_eigenvalues(cov)
+            out[q, 0] = l1
+            out[q, 1] = l2
+            out[q, 2] = l3
     return out
 
 

@@ -872,8 +872,8 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2
     estimated ones (``refine_normals=True``: e.g. a tiled run's spanning-tree normals).
     ``side_normals`` (per row of ``search.points``): the normals that tell where a ball
     reaches around the surface (:data:`WRAP_POINTS`); None: not checked. ``side_flatness``:
-    also mark the balls whose flatness exceeds :data:`meshcurv.fit.wrap.CAP_FLATNESS` (where
-    the side normals are estimated over those balls)."""
+    also mark the balls whose own shape says so (:func:`beyond_a_cap`; where the side
+    normals are estimated over those balls, :func:`_side_normals_estimated`)."""
     b = len(xb)
     if plan.normals == "given" and not plan.refine:
         qb, off = _off_surface(search, xb, qb, indptr, indices, radius, point_weights)
@@ -944,6 +944,13 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2
     out.k1[pos], out.k2[pos], out.d1[pos], out.d2[pos] = k1, k2, d1, d2
     out.normals[pos], out.n_samples[pos], out.residual[pos] = qb, samples, residual
     out.n_neighbors[pos], out.noise[pos], out.status[pos] = nbrs, noise, status
+
+
+def _side_normals_estimated(plan, mesh):
+    """Whether the folding test's normals are estimated over the fits' own balls: a cloud's,
+    unless given and used as they are (a mesh's are its faces'). Its balls' shape is then
+    checked too (:func:`beyond_a_cap`)."""
+    return not mesh and (plan.normals != "given" or plan.refine)
 
 
 def beyond_a_cap(points, xb, indptr, indices, radius, point_weights=None):
@@ -1160,8 +1167,7 @@ def run_radii(v, f, given_normals, radii, query, plan, progress=False):
     # fits may be anything), else the fits' field
     sides = [sc.field if sc.face_normals is None else _by_row(sc.face_normals, sc.search)
              for sc in scales]
-    # ... estimated over the balls of the fits: not to be trusted where a ball is no patch
-    flatness = f is None and (plan.normals != "given" or plan.refine)
+    flatness = _side_normals_estimated(plan, f is not None)
     for pos in blocks(order, progress, "curvature", block):
         idx = query[pos]
         xb = v[idx]
@@ -1428,8 +1434,7 @@ def _refit(v, idx, nv, face_normals, r, search, plan, own_normals, trusted=None,
             qb = _block_normals(nv, face_normals, idx[pos], xb, indptr, indices, r, search,
                                 plan, face_weight=face_weight)
         _fit_block(sub, pos, xb, qb, indptr, indices, r, search, plan, side_normals=side,
-                   side_flatness=face_normals is None and (plan.normals != "given"
-                                                           or plan.refine))
+                   side_flatness=_side_normals_estimated(plan, face_normals is not None))
     return sub
 
 

@@ -78,6 +78,20 @@ def _sorted_eigenvalues(cov):
     return min(a, b, c), max(min(a, b), min(max(a, b), c)), max(a, b, c)
 
 
+@njit(cache=True)
+def _ball_plane(points, indices, indptr, q, query_points, r2max, inv_r, point_weights, cov,
+                nrm):
+    """:func:`_plane_normal` of the ball of query point q (its list ``indices[indptr[q]:
+    indptr[q + 1]]``) into ``nrm``, with its covariance's eigenvalues ascending: ``(ok, l1,
+    l2, l3)`` (units of the radius squared; NaN where not ok)."""
+    if not _plane_normal(points, indices, indptr[q], indptr[q + 1], query_points[q, 0],
+                         query_points[q, 1], query_points[q, 2], r2max, inv_r, point_weights,
+                         cov, nrm):
+        return False, np.nan, np.nan, np.nan
+    l1, l2, l3 = _sorted_eigenvalues(cov)
+    return True, l1, l2, l3
+
+
 @njit(parallel=True, cache=True)
 def pca_normals_csr(points, query_points, indptr, indices, radius, point_weights=None):
     """Unit normals (m, 3) of the least-squares plane through each query point's neighbors.
@@ -127,12 +141,9 @@ def plane_agreement(points, query_points, normals, indptr, indices, radius, flat
         cov = np.empty((3, 3))
         nrm = np.empty(3)
         for q in range(ch * CHUNK, min(m, (ch + 1) * CHUNK)):
-            if not _plane_normal(points, indices, indptr[q], indptr[q + 1], query_points[q, 0],
-                                 query_points[q, 1], query_points[q, 2], r2max, inv_r,
-                                 point_weights, cov, nrm):
-                continue
-            l1, l2, l3 = _sorted_eigenvalues(cov)
-            if not (l1 <= flatness * l2 and l2 > 1e-6 * l3):
+            ok, l1, l2, l3 = _ball_plane(points, indices, indptr, q, query_points, r2max,
+                                         inv_r, point_weights, cov, nrm)
+            if not (ok and l1 <= flatness * l2 and l2 > 1e-6 * l3):
                 continue
             cos = abs(normals[q, 0] * nrm[0] + normals[q, 1] * nrm[1] + normals[q, 2] * nrm[2])
             if np.isfinite(cos):
@@ -160,14 +171,8 @@ def ball_spread(points, query_points, indptr, indices, radius, point_weights=Non
         cov = np.empty((3, 3))
         nrm = np.empty(3)
         for q in range(ch * CHUNK, min(m, (ch + 1) * CHUNK)):
-            if not _plane_normal(points, indices, indptr[q], indptr[q + 1], query_points[q, 0],
-                                 query_points[q, 1], query_points[q, 2], r2max, inv_r,
-                                 point_weights, cov, nrm):
-                continue
-            l1, l2, l3 = _sorted_eigenvalues(cov)
-            out[q, 0] = l1
-            out[q, 1] = l2
-            out[q, 2] = l3
+            _, out[q, 0], out[q, 1], out[q, 2] = _ball_plane(
+                points, indices, indptr, q, query_points, r2max, inv_r, point_weights, cov, nrm)
     return out
 
 

@@ -7,7 +7,6 @@ the compiled kernels in blocks, which bounds the memory of the neighbor lists.
 """
 
 import dataclasses
-import math
 from typing import Callable, NamedTuple
 
 import numpy as np
@@ -25,7 +24,7 @@ from .neighbors.csr import ball_mean, count_within, csr_rows
 from .neighbors.radius import PATCH_FLATNESS
 from .normals import face_normal_error, face_vertex_normals, orient, orient_along, \
     orient_like, orient_mst, orient_towards, pca_normals, sphere_normals
-from .normals.pca import ball_spread, plane_agreement, split_disagreement
+from .normals.pca import plane_agreement, split_disagreement
 from .normals.winding import coherent_faces
 from .result import CurvatureResult, Status, oriented_like
 
@@ -57,7 +56,7 @@ WRAP_POINTS = 2.0
 # fits), a ball holding a tube's whole section gives them anything, and the test nothing
 # (torus 3 / 0.4 cloud at 2.4 times the tube's radius: 71 % of the rows kept, 0.88 k1 off; a
 # pole of radius 0.1 in a scan at radius 0.44: 95 %, k1 0.3 for 10): there the ball's own
-# shape tells (:func:`beyond_a_cap`).
+# shape tells (:func:`meshcurv.fit.wrap.beyond_a_cap`).
 
 # Noise level (as a fraction of the radius) at which the bias correction is applied half.
 # The correction adds the smaller fit's noise, amplified: about 6 sigma / radius^2 in
@@ -872,7 +871,7 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2
     estimated ones (``refine_normals=True``: e.g. a tiled run's spanning-tree normals).
     ``side_normals`` (per row of ``search.points``): the normals that tell where a ball
     reaches around the surface (:data:`WRAP_POINTS`); None: not checked. ``side_flatness``:
-    also mark the balls whose own shape says so (:func:`beyond_a_cap`; where the side
+    also mark the balls whose own shape says so (:func:`meshcurv.fit.wrap.beyond_a_cap`; where the side
     normals are estimated over those balls, :func:`_side_normals_estimated`)."""
     b = len(xb)
     if plan.normals == "given" and not plan.refine:
@@ -936,7 +935,7 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2
         wraps = wrap.folding_weight(search.points, side_normals, xb, qb, indptr, indices,
                                     radius, point_weights) >= WRAP_POINTS
     if side_flatness:
-        wraps |= beyond_a_cap(search.points, xb, indptr, indices, radius, point_weights)
+        wraps |= wrap.beyond_a_cap(search.points, xb, indptr, indices, radius, point_weights)
     if wraps.any():
         for a in (k1, k2, d1, d2, residual):
             a[wraps] = np.nan
@@ -949,57 +948,8 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2
 def _side_normals_estimated(plan, mesh):
     """Whether the folding test's normals are estimated over the fits' own balls: a cloud's,
     unless given and used as they are (a mesh's are its faces'). Its balls' shape is then
-    checked too (:func:`beyond_a_cap`)."""
+    checked too (:func:`meshcurv.fit.wrap.beyond_a_cap`)."""
     return not mesh and (plan.normals != "given" or plan.refine)
-
-
-def beyond_a_cap(points, xb, indptr, indices, radius, point_weights=None):
-    """Whether each ball (b,) reaches around the surface by its shape alone: it is less flat
-    than a cap reaching a third of a turn around a sphere (the smallest eigenvalue of its
-    points' covariance over the middle one, :func:`meshcurv.normals.pca.ball_spread`, above
-    :data:`meshcurv.fit.wrap.CAP_FLATNESS`), and, in the balls of ``radius / s`` about the
-    same point (s = sqrt 2 and 2, each holding at least half the points a surface through the
-    point would put there, ``1 / s^2`` of them), either
-    - its flatness falls at least like the square of the radius, as a surface's shape makes
-      it (measured 0.22-0.43 and 0.08-0.19 of it at the two, on the tori and spheres of
-      :mod:`meshcurv.fit.wrap` from 1.8 times their radius), or
-    - the ball of radius / 2 is as little flat (a section still round there) and its middle
-      eigenvalue, the section's width (model units), keeps at least half of the ball's,
-      where a surface's falls like the square of the radius: a tube far narrower than the
-      ball (a pole, a branch, a wire; a pole of radius 0.1 in balls of 0.44: 97 % of its
-      rows marked, k1 0.3 for 10 before). Between the two (a tube 2.2-4 times narrower than
-      the ball: the torus 2 / 0.5 cloud at 3 times its radius) neither holds.
-
-    Noise makes a ball's flatness rise as it shrinks and its width fall with it: a ball of
-    noise is no fold; a point lying off the surface in noise sees the surface in its ball
-    but few points near it. Measured on CNC clouds without normals at sigma_eps 0.2 and
-    balls of ~50 points (noise 0.4 of the radius): 819, 18420 and 37 rows of 25k-50k above
-    1/2, 2, 17 and 1 of them marked; none at the default radius. At a border, noise as wide
-    as the half-ball can pass for a round section: squares with noise of 0.2 and 0.5 of the
-    radius, 3 and 1 border rows of 40k marked with balls of ~800 points; 0.2 and 0.3, 4 and
-    13 of 3000 with ~60 (none a radius from the border)."""
-    ev = ball_spread(points, xb, indptr, indices, radius, point_weights)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        flat = ev[:, 0] / ev[:, 1]
-        out = flat > wrap.CAP_FLATNESS
-    rows = np.flatnonzero(out)
-    if len(rows):
-        centres = xb[rows]
-        sub = csr_rows(indptr, indices, rows)
-        total = count_within(points, centres, *sub, radius * radius)
-        surface = np.ones(len(rows), dtype=bool)
-        for s2 in (2.0, 4.0):
-            inner = radius / math.sqrt(s2)
-            small = ball_spread(points, centres, *sub, inner, point_weights)
-            enough = 2.0 * s2 * count_within(points, centres, *sub, inner * inner) >= total
-            with np.errstate(invalid="ignore", divide="ignore"):
-                surface &= enough & (small[:, 0] / small[:, 1] <= flat[rows] / s2)
-        # the last: radius / 2, its eigenvalues in units of that radius squared
-        with np.errstate(invalid="ignore", divide="ignore"):
-            tube = enough & (small[:, 0] / small[:, 1] > wrap.CAP_FLATNESS) & (
-                small[:, 1] / s2 >= 0.5 * ev[rows, 1])
-        out[rows] = surface | tube
-    return out
 
 
 def _off_surface(search, xb, qb, indptr, indices, radius, point_weights):

@@ -45,7 +45,7 @@ class Status(IntEnum):
       the other side of a thin sheet, which the fits handle); on a cloud whose normals are
       estimated, also where the ball's points are less flat than such a cap and, as the
       ball shrinks, flatten like a surface or keep a round section as wide (a pole, a
-      branch; :func:`meshcurv.pipeline.beyond_a_cap`). A smaller radius gives an estimate.
+      branch; :func:`meshcurv.fit.wrap.beyond_a_cap`). A smaller radius gives an estimate.
     """
 
     OK = constants.STATUS_OK

@@ -94,22 +94,20 @@ def test_a_ball_of_noise_is_no_fold(sigma):
     border is beyond a cap (at the border, where the noise is as wide as the half-ball,
     measured 3 and 1 rows of 40k). Poles of radius 0.1 in balls of 0.44 and a tube's ball at
     2.4 times its radius, whose width stays or whose flatness falls, are."""
-    from meshcurv.pipeline import beyond_a_cap
-
     rng = np.random.default_rng(3)
     p = np.column_stack([rng.uniform(-3, 3, (40_000, 2)), rng.normal(scale=sigma, size=40_000)])
     indptr, indices = ball_csr(p, 0.5)
-    marked = beyond_a_cap(p, p, indptr, indices, 0.5)
+    marked = wrap.beyond_a_cap(p, p, indptr, indices, 0.5)
     inside = np.abs(p[:, :2]).max(axis=1) < 2.5
     assert not marked[inside].any() and marked.sum() <= 10
     t = rng.uniform(0.0, 2.0 * np.pi, 3000)
     pole = np.column_stack([0.1 * np.cos(t), 0.1 * np.sin(t), rng.uniform(0.0, 6.0, 3000)])
     middle = np.flatnonzero(np.abs(pole[:, 2] - 3.0) < 2.0)
     indptr, indices = ball_csr(pole, 0.44, pole[middle])
-    assert beyond_a_cap(pole, pole[middle], indptr, indices, 0.44).all()
+    assert wrap.beyond_a_cap(pole, pole[middle], indptr, indices, 0.44).all()
     s = surfaces.torus(3.0, 0.4, 300, 24)
     indptr, indices = ball_csr(s.vertices, 0.96, s.vertices[::50])
-    assert beyond_a_cap(s.vertices, s.vertices[::50], indptr, indices, 0.96).all()
+    assert wrap.beyond_a_cap(s.vertices, s.vertices[::50], indptr, indices, 0.96).all()
 
 
 def test_the_sparse_retrys_wider_balls_are_tested_too():

@@ -328,6 +328,18 @@ def test_coarse_estimate_is_invariant_to_rotation_translation_and_scale():
         assert np.allclose(res.k2 * scale, base.k2, rtol=0, atol=1e-6)
 
 
+def test_coarse_estimate_far_from_the_origin_as_at_it():
+    # a scan in UTM coordinates: a stencil step of 1e-4 of the support added to x ~ 5e6 was
+    # rounded to 1e-9, 1e-5 of the step (k1 off by 7e-5 on a 20k torus); the input's own
+    # rounding there (5e-10) moves k by ~1e-8
+    v, f, _ = _coarse_torus()
+    base = meshcurv.principal_curvatures(v, f)
+    assert np.nanmin(base.mls_share) > 0.5
+    far = meshcurv.principal_curvatures(v + [512345.0, 5412345.0, 312.0], f)
+    assert np.allclose(far.k1, base.k1, rtol=0, atol=1e-6)
+    assert np.allclose(far.k2, base.k2, rtol=0, atol=1e-6)
+
+
 def test_cloud_support_is_the_rule_of_the_12th_nearest_point_bit_for_bit():
     # support(): the grid count that spares dense points the k-d tree gives the rule's bits
     from meshcurv.coarse import CLOUD_RING, SUPPORT_CAP, SUPPORT_EDGES, support

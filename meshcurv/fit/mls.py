@@ -52,8 +52,11 @@ def _longest(indptr):
 def _gather(points, normals, point_weights, nbr, lo, hi, own, x, reach2, pts, nrm, pw):
     """The points ``own`` (a row of ``points``, or -1 for none) and ``nbr[lo:hi]`` (entries
     equal to ``own`` skipped), in that order, that can weigh in a fit about x: within
-    ``sqrt(reach2)`` of it, with a finite normal and a positive point weight; copied to
-    ``pts``, ``nrm`` and ``pw`` (weight 1 without ``point_weights``). Returns their count."""
+    ``sqrt(reach2)`` of it, with a finite normal and a positive point weight: their offsets
+    from x to ``pts``, normals to ``nrm`` and weights to ``pw`` (1 without
+    ``point_weights``). Returns their count. The fits about x then work in these local
+    coordinates: a stencil step added to x itself would be rounded to x's precision (a scan
+    in UTM coordinates, x ~ 5e6: 1e-9, 4e-5 of a step of 1e-4 of a support of 0.25)."""
     k = 0
     for e in range(lo - 1, hi):
         if e < lo:
@@ -74,8 +77,10 @@ def _gather(points, normals, point_weights, nbr, lo, hi, own, x, reach2, pts, nr
         weight = 1.0 if point_weights is None else point_weights[j]
         if not weight > 0.0:
             continue
+        pts[k, 0] = q0
+        pts[k, 1] = q1
+        pts[k, 2] = q2
         for a in range(3):
-            pts[k, a] = points[j, a]
             nrm[k, a] = normals[j, a]
         pw[k] = weight
         k += 1
@@ -276,6 +281,7 @@ def _mls_kernel(points, normals, query_points, query_normals, query_rows, indptr
         ends = np.empty((2, 3))
         row = np.empty(11)
         x = np.empty(3)
+        origin = np.zeros(3)       # x in the gathered points' local coordinates
         nq = np.empty(3)
         # the points of one query's fits, gathered once for its 13 (6) evaluations
         pts = np.empty((most + 1, 3))
@@ -293,11 +299,11 @@ def _mls_kernel(points, normals, query_points, query_normals, query_rows, indptr
                 k = _gather(points, normals, point_weights, indices, indptr[q], indptr[q + 1],
                             query_rows[q], x, reach * reach, pts, nrm, pw)
                 if gradient_only:
-                    _gradient(pts, nrm, pw, k, weighted, x, h, g, ends)
+                    _gradient(pts, nrm, pw, k, weighted, origin, h, g, ends)
                     ok = _unit_normal(g, nq, row) != 0.0
                 else:
-                    ok = _curvature_one(pts, nrm, pw, k, weighted, x, nq, h, hess, g, ends,
-                                        row)
+                    ok = _curvature_one(pts, nrm, pw, k, weighted, origin, nq, h, hess, g,
+                                        ends, row)
             for a in range(3):
                 nout[q, a] = row[8 + a] if ok else np.nan
             if gradient_only:

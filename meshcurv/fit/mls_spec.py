@@ -38,22 +38,28 @@ def potential(x, points, normals, support, point_weights=None):
     return -(u @ p_sum + u4 * b_sum) / big_w
 
 
+def _local(points, x):
+    """``points`` (m, 3) as offsets from x: the stencil's steps are taken about 0, not added
+    to x, whose rounding would change them (x ~ 5e6 in UTM coordinates: by 1e-9)."""
+    return np.asarray(points, dtype=np.float64) - np.asarray(x, dtype=np.float64)
+
+
 def mls_curvature_at(x, normal, points, normals, support, point_weights=None):
     """Curvature of the MLS surface F = 0 (:func:`potential`) at x, by central differences of
     F with the step ``STEP * support`` (13 evaluations: x, the axis steps and the diagonal
-    steps ``+-(e_i + e_j)``).
+    steps ``+-(e_i + e_j)``, about x in coordinates relative to it).
 
     Returns ``(k1, k2, d1, d2, n)``: curvatures (1 / model units, k1 >= k2, convex positive
     about ``n``), unit directions and the unit normal grad F / |grad F| turned to ``normal``'s
     side (:func:`meshcurv.surfaces.implicit_curvature`, whose directions are NaN at
     umbilics); NaNs where F is undefined at a stencil point.
     """
-    x = np.asarray(x, dtype=np.float64)
     step = STEP * support
     e = np.eye(3) * step
+    local = _local(points, x)
 
     def f(d):
-        return potential(x + d, points, normals, support, point_weights)
+        return potential(d, local, normals, support, point_weights)
 
     f0 = f(np.zeros(3))
     ahead, behind = np.array([f(e[i]) for i in range(3)]), np.array([f(-e[i]) for i in range(3)])
@@ -78,11 +84,11 @@ def mls_normal_at(x, normal, points, normals, support, point_weights=None):
     """The unit normal grad F / |grad F| of the MLS surface at x, turned to ``normal``'s side,
     by central differences over the axis steps ``+-STEP * support`` alone (the gradient of
     :func:`mls_curvature_at`); NaNs where F is undefined there or its gradient vanishes."""
-    x = np.asarray(x, dtype=np.float64)
     step = STEP * support
     e = np.eye(3) * step
-    grad = np.array([potential(x + e[i], points, normals, support, point_weights)
-                     - potential(x - e[i], points, normals, support, point_weights)
+    local = _local(points, x)
+    grad = np.array([potential(e[i], local, normals, support, point_weights)
+                     - potential(-e[i], local, normals, support, point_weights)
                      for i in range(3)]) / (2 * step)
     length = np.linalg.norm(grad)
     if not (np.isfinite(length) and length > 0):

@@ -126,7 +126,9 @@ def test_percentage_and_pure_radius_give_the_same_result(torus):
         x = a.current_mesh().vertex_custom_scalar_attribute_array(name)
         y = b.current_mesh().vertex_custom_scalar_attribute_array(name)
         scale = np.nanmax(np.abs(x))
-        np.testing.assert_allclose(x, y, rtol=1e-3, atol=1e-9)
+        # a field that crosses zero (k2 on the torus's top and bottom circles, ~3e-5) moves by
+        # the same absolute amount as its neighbours (~1e-7 of scale), so the bound is absolute
+        np.testing.assert_allclose(x, y, rtol=1e-3, atol=1e-6 * scale)
         assert np.mean(~np.isclose(x, y, rtol=1e-5, atol=1e-5 * scale)) <= 3e-3
 
 

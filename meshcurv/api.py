@@ -200,7 +200,8 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
         face-based normal orientation. Vertices with exactly equal coordinates (a triangle
         soup, a mesh split along texture seams) are joined for the neighborhoods and share
         one estimate (:mod:`meshcurv.weld`); every copy keeps its row. Faces wound against
-        their neighbours, and closed pieces wound inward, are taken turned
+        their neighbours, and closed pieces wound inward, are taken turned, and a triangle
+        listed more than once (a double-sided export) counts once
         (:mod:`meshcurv.normals.winding`; the result's ``orientation`` says how many).
     normals : (n, 3) float, optional
         Outward normals, used as given (normalised). Default: estimated, see

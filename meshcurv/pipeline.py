@@ -651,15 +651,15 @@ def _spanning_tree_normals(v, radius, search, finite, progress, point_weights=No
 
 
 def _start_normals(v, f, given, radius, search, finite, plan, progress, point_weights=None,
-                   turned=0):
+                   repair=""):
     """``(normals, face_normals, note, face_weight)`` before the blocks: the given ones, the
     faces', or the spanning tree's (which needs every normal first); None where blocks
     estimate their own. ``finite``: the finite rows of ``v`` (ball searches only); ``note``:
     how the normals get their sign (``CurvatureResult.orientation``); ``face_weight``: the
     per-vertex weight of the face normals in the blocks' plane-fit normals
     (:func:`face_weights`), or None. ``f`` wound coherently and outward already
-    (:func:`meshcurv.normals.winding.coherent_faces`), ``turned`` faces of the input's turned
-    to make it so (the note says how many)."""
+    (:func:`meshcurv.normals.winding.coherent_faces`); ``repair``: what that changed, for the
+    note (:func:`_repair_note`)."""
     if plan.normals == "given":
         return given, None, _given_note(given, v, search, finite), None
     if plan.normals == "mst":
@@ -672,9 +672,7 @@ def _start_normals(v, f, given, radius, search, finite, plan, progress, point_we
             face_normals = face_vertex_normals(v, f)
     note = ("oriented like the faces" if face_normals is not None else
             "oriented towards +z" if plan.viewpoint is None else "oriented towards the viewpoint")
-    if turned:
-        note += (f" ({turned} of {len(f)} faces turned to wind like their neighbours, outward "
-                 f"where closed)")
+    note += repair
     weight = (face_weights(v, f, face_normals, search.adjacency)
               if plan.face_mix and face_normals is not None else None)
     return (face_normals if plan.normals == "faces" else None), face_normals, note, weight
@@ -1104,11 +1102,13 @@ def run_radii(v, f, given_normals, radii, query, plan, progress=False):
         searches = [shared] * len(radii)
         block = block_size(shared, query, max(radii), what)
     # faces wound coherently and outward once for every radius: they orient the face normals
-    turned = 0
+    repair = ""
     if f is not None and plan.normals not in ("given", "mst"):
-        f, turned = coherent_faces(v, f, searches[0].adjacency)
+        m = len(f)
+        f, turned, repeated = coherent_faces(v, f, searches[0].adjacency)
+        repair = _repair_note(m, turned, repeated)
     scales = [_prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progress,
-                             turned) for s, r in zip(searches, radii)]
+                             repair) for s, r in zip(searches, radii)]
     outs = [_Outputs(len(query)) for _ in radii]
     # queries by grid cell for ball queries (the points a block touches then stay in cache);
     # as given for k-rings, whose memory accesses follow the mesh's own numbering
@@ -1173,9 +1173,18 @@ class _Scale(NamedTuple):
     face_weight: object = None
 
 
+def _repair_note(m, turned, repeated):
+    """The orientation note's account of :func:`meshcurv.normals.winding.coherent_faces` on
+    ``m`` faces: ``turned`` of them turned, ``repeated`` left out as repeats; "" if none."""
+    said = ([f"{repeated} of {m} faces repeating another left out"] if repeated else [])
+    said += ([f"{turned} of {m - repeated} faces turned to wind like their neighbours, "
+              f"outward where closed"] if turned else [])
+    return f" ({'; '.join(said)})" if said else ""
+
+
 def _prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progress,
-                   turned=0):
-    """The :class:`_Scale` of radius ``r`` over the search ``s``; ``turned``: see
+                   repair=""):
+    """The :class:`_Scale` of radius ``r`` over the search ``s``; ``repair``: see
     :func:`_start_normals`."""
     score = weights = weight = tree = plain = halves = None
     # estimated normals get the wide field's mix (see below; a mesh's where its normal rows
@@ -1185,7 +1194,7 @@ def _prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progre
     # not from the lists: before the outlier pass, whose plane fits take the faces' sides
     start = None if plan.normals == "mst" else _start_normals(v, f, given_normals, r, s,
                                                               finite, plan, progress,
-                                                              turned=turned)
+                                                              repair=repair)
     if mixes and f is not None:
         mixes = _normal_rows_weigh(v, s, r, plan, start)
     if plan.robust_points:

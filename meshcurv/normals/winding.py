@@ -6,7 +6,9 @@ to face; where a closed surface is wound inward (a mirrored model), every sign i
 outward where the piece is closed (positive enclosed volume), and as most of its area was
 wound where it is open; what MeshLab's "Re-Orient all faces coherently" and trimesh's
 ``repair.fix_winding`` and ``fix_inversion`` do. Coherent open meshes and outward closed
-ones are not touched."""
+ones are not touched. A triangle listed twice (a double-sided export, the same triangle wound
+both ways; a mesh merged with part of itself) counts once, as first listed: its copies would
+otherwise cancel or double its face normal and join nothing in the winding."""
 
 import numpy as np
 from numba import njit
@@ -100,25 +102,34 @@ def _propagate_turns(indptr, indices, clash, n_faces):
 
 
 def coherent_faces(vertices, faces, adjacency=None):
-    """``(faces, n_turned)``: ``faces`` ((m, 3) int64) with the rows that were wound against
-    their neighbours, or inward on a closed piece, reversed, and how many; ``faces`` itself
-    and 0 where there are none.
+    """``(faces, n_turned, n_repeated)``: ``faces`` ((m', 3) int64) with the rows that were
+    wound against their neighbours, or inward on a closed piece, reversed, and how many;
+    ``faces`` itself and 0, 0 where there are none. Faces repeating an earlier face's three
+    vertices, in any order and winding, are left out (``n_repeated`` of them, m' = m -
+    n_repeated).
 
     Each connected piece (faces joined through edges two faces share) is wound like its first
     face, then turned as a whole to face outward where it is closed (no edge with one face:
     positive enclosed volume), else to keep the winding of most of its area. Edges of three
     or more faces join nothing; a piece that cannot be wound coherently (a Moebius strip)
-    keeps the winding its spanning tree gives. ``adjacency``: the mesh's
-    :func:`meshcurv.neighbors.edge_adjacency`, if already made.
+    keeps the winding its spanning tree gives.
+    ``adjacency``: the mesh's :func:`meshcurv.neighbors.edge_adjacency`, if already made.
     """
     f = np.asarray(faces, dtype=np.int64)
     v = np.asarray(vertices, dtype=np.float64)
     if len(f) == 0:
-        return f, 0
+        return f, 0, 0
     indptr, indices = edge_adjacency(f, len(v)) if adjacency is None else adjacency
     counts = directed_edge_counts(f, indptr, indices)
+    # a repeated face runs through an edge one way a second time (its copy wound alike, or a
+    # neighbour across an edge wound like its reversed copy): only lone triangles listed both
+    # ways take the first path with a repeat (their face normals cancel: NaN there)
     if not (counts > 1).any():
-        return _outward_closed_pieces(v, faces, indptr, indices, counts)
+        return (*_outward_closed_pieces(v, faces, indptr, indices, counts), 0)
+    first = np.unique(np.sort(f, axis=1), axis=0, return_index=True)[1]
+    n_repeated = len(f) - len(first)
+    if n_repeated:
+        f = f[np.sort(first)]
     m = len(f)
     a = f.ravel()
     b = f[:, [1, 2, 0]].ravel()
@@ -155,7 +166,7 @@ def coherent_faces(vertices, faces, adjacency=None):
     turn = turn.astype(bool) ^ flip_piece[piece]
     out = f.copy()
     out[turn] = f[turn][:, ::-1]
-    return out, int(turn.sum())
+    return out, int(turn.sum()), n_repeated
 
 
 def _outward_closed_pieces(v, faces, indptr, indices, counts):

@@ -196,7 +196,8 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
     vertices : (n, 3) float, trimesh.Trimesh or trimesh.PointCloud
         Points, model units. Never reordered; NaN/inf rows give NaN results.
     faces : (m, 3) int, optional
-        Triangles, counter-clockwise seen from outside. Enables the k-ring neighborhood and
+        Triangles, counter-clockwise seen from outside ((m, 4) quads are split in two
+        triangles each, as trimesh splits them). Enables the k-ring neighborhood and
         face-based normal orientation. Vertices with exactly equal coordinates (a triangle
         soup, a mesh split along texture seams) are joined for the neighborhoods and share
         one estimate (:mod:`meshcurv.weld`); every copy keeps its row. Faces wound against

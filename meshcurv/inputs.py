@@ -1,6 +1,7 @@
 """The one shape check of the estimator's inputs (vertices, faces, normals)."""
 
 import numpy as np
+from trimesh.geometry import triangulate_quads
 
 __all__ = ["as_arrays"]
 
@@ -9,7 +10,8 @@ def as_arrays(vertices, faces=None, normals=None):
     """``(v, f, nv)``: the estimator's inputs validated and converted.
 
     ``v`` (n, 3) float64 contiguous; ``f`` (m, 3) int64 with indices in 0..n-1, or None (also
-    for an empty face list: the points are then a cloud); ``nv`` (n, 3) float64, or None. A
+    for an empty face list: the points are then a cloud; quads (m, 4) come split in two
+    triangles each, as ``trimesh.geometry.triangulate_quads`` splits them); ``nv`` (n, 3) float64, or None. A
     trimesh.Trimesh supplies vertices and faces, a trimesh.PointCloud its points (a
     trimesh.Scene is refused: it is no one surface). Raises ValueError (one line) for wrong
     shapes, complex numbers, non-integer faces and face indices out of range.
@@ -34,15 +36,22 @@ def as_arrays(vertices, faces=None, normals=None):
         f = np.asarray(faces)
         if f.size == 0:
             f = np.zeros((0, 3), dtype=np.int64)
-        if f.ndim != 2 or f.shape[1] != 3:
-            raise ValueError(f"faces must be an (m, 3) integer array, got shape {f.shape}")
+        if f.ndim != 2 or f.shape[1] not in (3, 4):
+            raise ValueError(f"faces must be an (m, 3) integer array of triangles (or (m, 4) "
+                             f"of quads), got shape {f.shape}")
+        if f.dtype == bool or not np.issubdtype(f.dtype, np.number):
+            raise ValueError(f"faces must hold integer vertex indices, got {f.dtype}")
         if not np.issubdtype(f.dtype, np.integer):
             if not np.all(np.mod(f, 1) == 0):
                 raise ValueError("faces must hold integer vertex indices")
         f = f.astype(np.int64, copy=False)
         if f.size and (f.min() < 0 or f.max() >= len(v)):
-            raise ValueError(
-                f"faces index vertices 0..{len(v) - 1}, found indices {f.min()}..{f.max()}")
+            hint = (" (numbered from 1, as in OBJ files? pass faces - 1)"
+                    if f.min() == 1 and f.max() == len(v) else "")
+            raise ValueError(f"faces index vertices 0..{len(v) - 1}, found indices "
+                             f"{f.min()}..{f.max()}{hint}")
+        if f.shape[1] == 4:     # quads: two triangles each, split as trimesh splits them
+            f = triangulate_quads(f)
         if f.size == 0:
             f = None            # no faces (trimesh.Trimesh(vertices=points)): a point cloud
     nv = None

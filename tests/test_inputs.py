@@ -49,3 +49,44 @@ def test_complex_coordinates_are_refused_in_one_line():
         meshcurv.principal_curvatures(p.astype(complex))
     with pytest.raises(ValueError, match="normals must be real numbers"):
         meshcurv.principal_curvatures(p, normals=(p + 0j))
+
+
+def test_quads_are_split_as_trimesh_splits_them():
+    # a grid torus of quads (an OBJ's faces as a numpy user holds them): the same result as
+    # the triangles trimesh.Trimesh makes of them, and the torus's curvature
+    from meshcurv import surfaces
+    nu, nv = 60, 20
+    u, w = np.meshgrid(np.arange(nu), np.arange(nv), indexing="ij")
+    corner = lambda a, b: ((a % nu) * nv + (b % nv)).ravel()        # noqa: E731
+    quads = np.stack([corner(u, w), corner(u + 1, w), corner(u + 1, w + 1), corner(u, w + 1)],
+                     axis=1)
+    t = 2 * np.pi * np.arange(nu)[:, None] / nu
+    p = 2 * np.pi * np.arange(nv)[None, :] / nv
+    ring = 2.0 + 0.5 * np.cos(p)
+    v = np.stack([ring * np.cos(t), ring * np.sin(t), 0.5 * np.sin(p) + 0 * t], axis=-1)
+    v = v.reshape(-1, 3)
+    res = meshcurv.principal_curvatures(v, quads)
+    split = meshcurv.principal_curvatures(trimesh.Trimesh(v, quads, process=False))
+    for name in ("k1", "k2", "d1", "d2", "normals", "status"):
+        assert np.array_equal(getattr(res, name), getattr(split, name), equal_nan=True), name
+    truth = surfaces.torus_at(v, 2.0, 0.5)
+    # outward (convex positive), k1 = 1 / 0.5 around the tube: mean |dk1|, |dk2| measured
+    # 0.0008, 0.0020 (0.04 %, 0.1 % of k1)
+    assert res.valid.all()
+    assert np.mean(np.abs(res.k1 - truth.k1)) < 0.005
+    assert np.mean(np.abs(res.k2 - truth.k2)) < 0.005
+
+
+def test_faces_refused_in_one_line_with_what_was_wrong():
+    v = trimesh.creation.icosphere(1).vertices
+    f = trimesh.creation.icosphere(1).faces
+    for faces, says in ((f[:, :2], r"\(m, 3\) integer array of triangles .* shape \(80, 2\)"),
+                        (f.ravel(), r"got shape \(240,\)"),
+                        (f + 0.5, "integer vertex indices"),
+                        (f.astype(bool), "integer vertex indices, got bool"),
+                        (f - 1, r"found indices -1\.\.40$"),
+                        (f + 1, r"found indices 1\.\.42 \(numbered from 1, as in OBJ files\? "
+                                r"pass faces - 1\)")):
+        with pytest.raises(ValueError, match=says) as e:
+            meshcurv.principal_curvatures(v, faces)
+        assert "\n" not in str(e.value)

@@ -6,15 +6,32 @@ curvature by :mod:`meshcurv.coarse` where the input is coarse for its shape or i
 are limited by its sampling.
 """
 
+from dataclasses import replace
+
 import numpy as np
+from scipy.spatial import cKDTree
 
 from . import coarse as coarse_mls, pipeline, scale as scale_select, weld
 from .inputs import as_arrays
 from .neighbors import MAX_BALL_FRACTION, default_radius, power_of_two_scale
 from .options import Options, resolve_plan
 from .result import Status
+from .weld import expand_rows
 
 __all__ = ["principal_curvatures", "estimate_normals", "no_estimate_reason"]
+
+
+# Radii, as multiples of the call's, at which the rows whose ball reached around the surface
+# are estimated again (:func:`_smaller_balls`), each at the largest that serves: down to a
+# sixteenth, a tube or sphere 16 times narrower than the call's ball.
+WRAP_FACTORS = (0.5, 0.25, 0.125, 0.0625)
+# Share of the points of a ball twice as wide above which a ball is not tried there: it holds
+# a whole part narrower than itself (a surface patch keeps about a quarter when the radius
+# halves, a tube's segment half).
+WHOLE_PART = 0.75
+# A result's per-row arrays that a smaller ball's estimate replaces.
+_ROW_FIELDS = ("k1", "k2", "d1", "d2", "normals", "valid", "n_neighbors", "n_samples",
+               "residual", "noise", "status", "outlier_score")
 
 
 def _check_query(query, n):
@@ -302,9 +319,65 @@ def _estimate(v, f, given_normals, radius, query, plan, progress):
                                        coarse, probe_fits=default_radius)[0]
         return per_vertex_scale(query)[0]
     radius, coarse = _resolve_radius(radius, v, f, details=True)
+    res = _at_radius(v, f, given_normals, radius, query, plan, progress, coarse)
+    return _smaller_balls(res, v, f, given_normals, query, plan, progress)
+
+
+def _at_radius(v, f, given_normals, radius, query, plan, progress, coarse):
+    """The curvature at the vertex indices ``query`` at one resolved ``radius``: the circle
+    fits, blended with the MLS curvature where :func:`_blended` says."""
     if plan.coarse_mls and np.isfinite(radius):
         return _blended(v, f, given_normals, [radius], query, plan, progress, coarse)[0]
     return _run_one(v, f, given_normals, radius, query, plan, progress)
+
+
+def _smaller_balls(res, v, f, given_normals, query, plan, progress):
+    """``res`` with its rows whose ball reached around the surface (``Status.WRAPS_AROUND``:
+    a part far narrower than the rest, such as a small object beside a large one in one mesh)
+    estimated again at :data:`WRAP_FACTORS` times the radius, each at the largest where the
+    estimate succeeds, as a call at that radius gives it (``radius_used`` says which; noise
+    weighs more there, as it would in that call); the others keep their status.
+
+    Only with ``sparse_retry``, and where the folding test reads normals not estimated over
+    the balls (a mesh's faces', or normals given and used as they are): plane fits over a
+    ball 2.2-4 times wider than a tube pass the shape test of clouds
+    (:func:`meshcurv.fit.wrap.beyond_a_cap`), so there a smaller ball could serve a wrong
+    estimate as valid."""
+    rows = np.flatnonzero(res.status == Status.WRAPS_AROUND)
+    if (not len(rows) or not plan.sparse_retry
+            or pipeline.side_normals_estimated(plan, f is not None)):
+        return res
+    names = [name for name in _ROW_FIELDS if getattr(res, name) is not None]
+    out = {name: getattr(res, name).copy() for name in names}
+    out["radius_used"] = np.where(res.valid, res.radius, np.nan) if res.radius_used is None \
+        else res.radius_used.copy()
+    share = None if res.mls_share is None else res.mls_share.copy()
+    finite = np.isfinite(v).all(axis=1)
+    tree = cKDTree(v[finite])
+    held = tree.query_ball_point(v[query[rows]], res.radius, return_length=True)
+    for factor in WRAP_FACTORS:
+        r = res.radius * factor
+        # a ball that kept WHOLE_PART of the points of one twice as wide holds a whole part
+        # (a surface's ball keeps a quarter, a tube's half) and would reach around it too
+        now = tree.query_ball_point(v[query[rows]], r, return_length=True)
+        tried = now <= WHOLE_PART * held
+        if not tried.any():
+            held = now
+            continue
+        sub = _at_radius(v, f, given_normals, r, query[rows[tried]], plan, progress, False)
+        done = np.zeros(len(rows), dtype=bool)
+        done[tried] = sub.status == Status.OK
+        sub = expand_rows(sub, np.cumsum(tried)[done] - 1)
+        for name in names:
+            out[name][rows[done]] = getattr(sub, name)
+        out["radius_used"][rows[done]] = r if sub.radius_used is None else sub.radius_used
+        if sub.mls_share is not None:
+            share = np.zeros(len(res)) if share is None else share
+            share[rows[done]] = sub.mls_share
+        rows, held = rows[~done], now[~done]
+        if not len(rows):
+            break
+    return replace(res, **out, mls_share=share)
 
 
 def _blended(v, f, given_normals, radii, query, plan, progress, coarse):

@@ -250,9 +250,16 @@ class Options:
         vertices invalid, or estimated from a handful of points with a PCA normal a clump can
         tilt (clumpy unit-sphere clouds without normals: |dk| up to 9). On clouds with
         estimated normals an estimate from fewer than 11 points that no larger ball replaces
-        is dropped (``TOO_FEW_NEIGHBORS``). ``result.n_neighbors`` is the count of the ball
-        used; ``result.radius`` stays the call's. False: every vertex at ``radius`` alone
-        (tiled runs, whose halo covers that radius only).
+        is dropped (``TOO_FEW_NEIGHBORS``). The other way round, on meshes and on clouds
+        whose normals are given and used as they are, vertices whose ball reaches around the
+        surface (``WRAPS_AROUND``: a small part beside a large one, a thin tube) are
+        estimated at 1/2, 1/4, 1/8 and 1/16 of ``radius``, each at the largest that serves,
+        as a call at that radius would estimate them (clouds with estimated normals keep
+        ``WRAPS_AROUND``: a ball 2.2-4 times wider than a tube passes their shape test).
+        ``result.n_neighbors`` is the count of the ball used, ``result.radius_used`` its
+        radius; ``result.radius`` stays the call's. A radius list and ``radius="auto"``
+        retry sparse rows only. False: every vertex at ``radius`` alone (tiled runs, whose
+        halo covers that radius only).
     coarse_fit : {"mls", "circles"}, default "mls"
         Inputs coarse for their shape (the default radius had to be made smaller because
         balls of ~100 points reached around the shape: a low-poly torus), estimated at their

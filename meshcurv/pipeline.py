@@ -30,7 +30,8 @@ from .result import CurvatureResult, Status, oriented_like
 
 __all__ = ["run", "run_radii", "estimate_normals", "weight_blend", "clean_fraction",
            "given_normal_noise", "mix_given_normals", "Search", "ball_search", "kring_search",
-           "block_size", "blocks", "mst_normals", "outlier_scores", "retry_sparse", "BLOCK",
+           "block_size", "blocks", "mst_normals", "outlier_scores", "retry_sparse",
+           "side_normals_estimated", "BLOCK",
            "BLOCK_ENTRIES", "MAX_PAIRS", "NOISE_SCALE", "BIAS_NOISE_SCALE", "BIAS_TILT_SCALE",
            "GIVEN_SAMPLE",
            "SPARSE_FACTORS", "MAX_BALL_FRACTION", "FIELD_RATIO", "FIELD_NOISE_RATIO",
@@ -870,7 +871,7 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2
     ``side_normals`` (per row of ``search.points``): the normals that tell where a ball
     reaches around the surface (:data:`WRAP_POINTS`); None: not checked. ``side_flatness``:
     also mark the balls whose own shape says so (:func:`meshcurv.fit.wrap.beyond_a_cap`; where the side
-    normals are estimated over those balls, :func:`_side_normals_estimated`)."""
+    normals are estimated over those balls, :func:`side_normals_estimated`)."""
     b = len(xb)
     if plan.normals == "given" and not plan.refine:
         qb, off = _off_surface(search, xb, qb, indptr, indices, radius, point_weights)
@@ -943,7 +944,7 @@ def _fit_block(out, pos, xb, qb, indptr, indices, radius, search, plan, given_a2
     out.n_neighbors[pos], out.noise[pos], out.status[pos] = nbrs, noise, status
 
 
-def _side_normals_estimated(plan, mesh):
+def side_normals_estimated(plan, mesh):
     """Whether the folding test's normals are estimated over the fits' own balls: a cloud's,
     unless given and used as they are (a mesh's are its faces'). Its balls' shape is then
     checked too (:func:`meshcurv.fit.wrap.beyond_a_cap`)."""
@@ -1117,7 +1118,7 @@ def run_radii(v, f, given_normals, radii, query, plan, progress=False):
     # fits may be anything), else the fits' field
     sides = [sc.field if sc.face_normals is None else _by_row(sc.face_normals, sc.search)
              for sc in scales]
-    flatness = _side_normals_estimated(plan, f is not None)
+    flatness = side_normals_estimated(plan, f is not None)
     for pos in blocks(order, progress, "curvature", block):
         idx = query[pos]
         xb = v[idx]
@@ -1393,7 +1394,7 @@ def _refit(v, idx, nv, face_normals, r, search, plan, own_normals, trusted=None,
             qb = _block_normals(nv, face_normals, idx[pos], xb, indptr, indices, r, search,
                                 plan, face_weight=face_weight)
         _fit_block(sub, pos, xb, qb, indptr, indices, r, search, plan, side_normals=side,
-                   side_flatness=_side_normals_estimated(plan, face_normals is not None))
+                   side_flatness=side_normals_estimated(plan, face_normals is not None))
     return sub
 
 

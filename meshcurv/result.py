@@ -45,7 +45,8 @@ class Status(IntEnum):
       the other side of a thin sheet, which the fits handle); on a cloud whose normals are
       estimated, also where the ball's points are less flat than such a cap and, as the
       ball shrinks, flatten like a surface or keep a round section as wide (a pole, a
-      branch; :func:`meshcurv.fit.wrap.beyond_a_cap`). A smaller radius gives an estimate.
+      branch; :func:`meshcurv.fit.wrap.beyond_a_cap`). A smaller radius gives an estimate:
+      on meshes and clouds with normals given, ``sparse_retry`` tries 1/2 to 1/16 of it.
     """
 
     OK = constants.STATUS_OK
@@ -91,7 +92,8 @@ class CurvatureResult:
     radius_used : (n,) float64, the neighborhood radius of the row's estimate, model units:
         ``radius`` for a fixed radius, the radius each vertex chose with ``radius="auto"``
         (:mod:`meshcurv.scale`), the wider radius where ``sparse_retry`` re-estimated a row
-        that had too few points; NaN where ``valid`` is False. None where the producer does
+        that had too few points, the smaller one where its ball reached around the surface;
+        NaN where ``valid`` is False. None where the producer does
         not tell (then ``radius`` where valid)
     mls_share : (n,) float64 in [0, 1] or None, the share of the MLS surface's curvature in
         each row's k1 and k2 (:mod:`meshcurv.coarse`; where it is at least 0.5, d1, d2 and

@@ -63,9 +63,22 @@ def test_balls_past_a_third_of_the_tube_are_marked_and_smaller_ones_are_not(face
         assert res.valid.all()
         assert np.mean(np.abs(res.k1 - s.k1)) < 0.03 * 2.5
     for factor in (2.0, 2.4):
-        res = meshcurv.principal_curvatures(s.vertices, f, radius=factor * 0.4)
+        res = meshcurv.principal_curvatures(s.vertices, f, radius=factor * 0.4,
+                                            sparse_retry=False)
         assert np.all(res.status == Status.WRAPS_AROUND)
         assert not res.valid.any() and np.isnan(res.k1).all()
+        # by default a mesh's rows are served by half the ball, as a call at that radius
+        # serves them; a cloud's plane-fit normals leave the smaller balls unchecked (see
+        # test_smaller_balls_serve_what_wraps_around): no estimate
+        res = meshcurv.principal_curvatures(s.vertices, f, radius=factor * 0.4)
+        if not faces:
+            assert np.all(res.status == Status.WRAPS_AROUND)
+            continue
+        half = meshcurv.principal_curvatures(s.vertices, f, radius=factor * 0.2)
+        assert res.valid.all() and np.all(res.radius_used == factor * 0.2)
+        assert res.radius == factor * 0.4
+        for name in ("k1", "k2", "d1", "d2", "normals", "noise", "n_neighbors"):
+            assert np.array_equal(getattr(res, name), getattr(half, name)), name
 
 
 def test_a_sphere_smaller_than_the_ball_is_marked_and_a_thin_sheet_is_not():
@@ -73,7 +86,7 @@ def test_a_sphere_smaller_than_the_ball_is_marked_and_a_thin_sheet_is_not():
     marked. Two flat sheets 0.1 apart, facing away, in balls of 0.3 with their normals: far
     sides without a bend between them; every row keeps its exact estimate (k = 0)."""
     s = surfaces.sphere(0.3, 4)
-    res = meshcurv.principal_curvatures(s.vertices, s.faces, radius=0.54)
+    res = meshcurv.principal_curvatures(s.vertices, s.faces, radius=0.54, sparse_retry=False)
     assert np.all(res.status == Status.WRAPS_AROUND)
     x, y = (a.ravel() for a in np.meshgrid(np.linspace(-1, 1, 41), np.linspace(-1, 1, 41)))
     v = np.concatenate([np.column_stack([x, y, np.full_like(x, 0.05)]),
@@ -126,3 +139,34 @@ def test_the_sparse_retrys_wider_balls_are_tested_too():
     assert res.radius == pytest.approx(0.0559, rel=0.01)
     assert np.all(res.status[tube] == Status.TOO_FEW_NEIGHBORS)
     assert res.valid[len(t.vertices):].all()
+
+
+def test_smaller_balls_serve_what_wraps_around():
+    """One mesh of two icospheres, radius 1 and 0.05 (2562 vertices each): the default
+    radius (0.40, the large sphere's ~100 vertices) holds all of the small one, whose rows
+    were all WRAPS_AROUND. Its rows are now estimated at an eighth of it (0.049; a half and a
+    quarter still hold the whole sphere and are not tried): max |dk| measured 4.7e-4 of
+    k = 20 (1e-12 on the large sphere); with trimesh's vertex normals given on the points
+    alone 0.0038 (0.0009 on the large one, whose given normals are those of its 320-face
+    subdivision). Without faces or normals the plane fits over balls 2.2-4 times a part's
+    width pass the shape test, so the rows keep WRAPS_AROUND rather than risk a wrong
+    estimate."""
+    import trimesh
+    big, small = trimesh.creation.icosphere(4, radius=1.0), trimesh.creation.icosphere(4, 0.05)
+    v = np.vstack([big.vertices, small.vertices + [3.0, 0.0, 0.0]])
+    f = np.vstack([big.faces, small.faces + len(big.vertices)])
+    n = np.vstack([big.vertex_normals, small.vertex_normals])
+    k = np.r_[np.full(len(big.vertices), 1.0), np.full(len(small.vertices), 20.0)]
+    on_small = np.arange(len(v)) >= len(big.vertices)
+    for res in (meshcurv.principal_curvatures(v, f),
+                meshcurv.principal_curvatures(v, normals=n)):
+        assert res.valid.all()
+        dk = np.maximum(np.abs(res.k1 - k), np.abs(res.k2 - k))
+        assert dk[on_small].max() < 0.01 and dk[~on_small].max() < 0.003
+        assert np.all(res.radius_used[~on_small] == res.radius)
+        assert np.allclose(res.radius_used[on_small], res.radius / 8)
+    plain = meshcurv.principal_curvatures(v, f, sparse_retry=False)
+    assert np.all(plain.status[on_small] == Status.WRAPS_AROUND)
+    assert plain.valid[~on_small].all()
+    res = meshcurv.principal_curvatures(v)
+    assert np.all(res.status[on_small] == Status.WRAPS_AROUND)

@@ -35,7 +35,7 @@ from numba import njit, prange
 from ..neighbors.csr import count_within, csr_rows
 from ..normals.pca import ball_spread
 
-__all__ = ["folding_weight", "beyond_a_cap", "TURN", "CAP_FLATNESS"]
+__all__ = ["folding_weight", "beyond_a_cap", "TURN", "CAP_FLATNESS", "SECTION_KEEP"]
 
 TURN = math.radians(120.0)
 
@@ -46,6 +46,13 @@ _TURN_COS = math.cos(TURN)
 # less flat than that reaches around more than the test above allows, whatever the normals say
 # (a tube's ball gets there at 1.9 times its radius).
 CAP_FLATNESS = (1.0 - _TURN_COS) / (2.0 * (2.0 + _TURN_COS))
+
+# The share of a ball's width (its middle eigenvalue, model units) that the ball of radius / s
+# keeps where it holds a round section still (:func:`beyond_a_cap`): at s = sqrt 2 a tube's
+# section lies whole in both balls and keeps it all; a surface's patch and a ball of noise
+# keep half (1 / s^2), and noise as wide as 0.76 of the radius is needed to reach 0.85 there.
+# At s = 2, where a section 4 times narrower than the ball stays whole, half.
+SECTION_KEEP = ((2.0, 0.85), (4.0, 0.5))
 _ACROSS2 = math.sin(0.5 * TURN) ** 2
 
 
@@ -108,18 +115,25 @@ def beyond_a_cap(points, xb, indptr, indices, radius, point_weights=None):
     - its flatness falls at least like the square of the radius, as a surface's shape makes
       it (measured 0.22-0.43 and 0.08-0.19 of it at the two, on the tori and spheres of
       this module from 1.8 times their radius), or
-    - the ball of radius / 2 is as little flat (a section still round there) and its middle
-      eigenvalue, the section's width (model units), keeps at least half of the ball's,
-      where a surface's falls like the square of the radius: a tube far narrower than the
-      ball (a pole, a branch, a wire; a pole of radius 0.1 in balls of 0.44: 97 % of its
-      rows marked, k1 0.3 for 10 before). Between the two (a tube 2.2-4 times narrower than
-      the ball: the torus 2 / 0.5 cloud at 3 times its radius) neither holds.
+    - the ball of radius / sqrt 2 or radius / 2 is as little flat (a section still round
+      there) and its middle eigenvalue, the section's width (model units), keeps at least
+      :data:`SECTION_KEEP` of the ball's, where a surface's falls like the square of the
+      radius: a tube narrower than the ball (a pole, a branch, a wire; a pole of radius 0.1
+      in balls of 0.44: 97 % of its rows marked, k1 0.3 for 10 before). At radius / 2 alone
+      tubes 2.2-4 times narrower than the ball passed (pole of radius 0.1 alone at 0.3 and
+      0.35: 97 % and 98 % of the rows valid, median k1 0.18 and 0.32 for 10; the torus
+      3 / 0.4 cloud at 3 and 3.5 times its radius 96 % and 95 %, k1 0.9 of itself off);
+      radius / sqrt 2 marks them all; at 0.277, 2.77 times the pole's radius, 91 % (the
+      rest: balls not less flat than a cap to begin with).
 
     Noise makes a ball's flatness rise as it shrinks and its width fall with it: a ball of
     noise is no fold; a point lying off the surface in noise sees the surface in its ball
     but few points near it. Measured on CNC clouds without normals at sigma_eps 0.2 and
     balls of ~50 points (noise 0.4 of the radius): 819, 18420 and 37 rows of 25k-50k above
-    1/2, 2, 17 and 1 of them marked; none at the default radius. At a border, noise as wide
+    1/2, 2, 17 and 1 of them marked; none at the default radius (the test at radius / sqrt 2
+    added 5 rows of torus_050000 there, no row of the other CNC clouds, of the terrains, of
+    the falling-density half sphere or of the sphere with spikes in ``docs/accuracy_cases``).
+    At a border, noise as wide
     as the half-ball can pass for a round section: squares with noise of 0.2 and 0.5 of the
     radius, 3 and 1 border rows of 40k marked with balls of ~800 points; 0.2 and 0.3, 4 and
     13 of 3000 with ~60 (none a radius from the border)."""
@@ -133,15 +147,15 @@ def beyond_a_cap(points, xb, indptr, indices, radius, point_weights=None):
         sub = csr_rows(indptr, indices, rows)
         total = count_within(points, centres, *sub, radius * radius)
         surface = np.ones(len(rows), dtype=bool)
-        for s2 in (2.0, 4.0):
+        tube = np.zeros(len(rows), dtype=bool)
+        for s2, keep in SECTION_KEEP:
             inner = radius / math.sqrt(s2)
             small = ball_spread(points, centres, *sub, inner, point_weights)
             enough = 2.0 * s2 * count_within(points, centres, *sub, inner * inner) >= total
             with np.errstate(invalid="ignore", divide="ignore"):
                 surface &= enough & (small[:, 0] / small[:, 1] <= flat[rows] / s2)
-        # the last: radius / 2, its eigenvalues in units of that radius squared
-        with np.errstate(invalid="ignore", divide="ignore"):
-            tube = enough & (small[:, 0] / small[:, 1] > CAP_FLATNESS) & (
-                small[:, 1] / s2 >= 0.5 * ev[rows, 1])
+                # eigenvalues in units of the inner radius squared
+                tube |= enough & (small[:, 0] / small[:, 1] > CAP_FLATNESS) & (
+                    small[:, 1] / s2 >= keep * ev[rows, 1])
         out[rows] = surface | tube
     return out

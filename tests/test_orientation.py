@@ -409,7 +409,7 @@ def test_bridging_kernels_agree_with_scipy_and_numpy():
     from scipy.sparse import csr_matrix
     from scipy.sparse.csgraph import connected_components
 
-    from meshcurv.normals.orient import graph_pieces, nearest_in_other_piece
+    from meshcurv.normals.orient import BRIDGE_TILT, graph_pieces, nearest_in_other_piece
     rng = np.random.default_rng(3)
     n, k = 500, 3
     graph = rng.integers(-1, n, (n, k)).astype(np.int32)
@@ -430,13 +430,31 @@ def test_bridging_kernels_agree_with_scipy_and_numpy():
     query = rng.uniform(size=(40, 3))
     query[0] = points[7]
     own = rng.choice(labels, 40)
-    got = nearest_in_other_piece(points, query, indptr, indices, vertex, labels, own)
+    # normals by vertex (list entries map to vertices through ``vertex``), some NaN
+    normals = rng.normal(size=(n, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    normals[::17] = np.nan
+    query_normals = rng.normal(size=(40, 3))
+    query_normals /= np.linalg.norm(query_normals, axis=1, keepdims=True)
+    got = nearest_in_other_piece(points, query, indptr, indices, vertex, labels, own, normals,
+                                 query_normals)
+    refused = 0
     for q in range(40):
         entries = indices[indptr[q]:indptr[q + 1]]
-        d2 = ((points[entries] - query[q]) ** 2).sum(axis=1)
+        d = points[entries] - query[q]
+        d2 = (d ** 2).sum(axis=1)
         ok = (labels[vertex[entries]] != own[q]) & (d2 > 0)
-        expected = vertex[entries[ok][np.argmin(d2[ok])]] if ok.any() else -1
+        expected = -1
+        if ok.any():
+            e = np.flatnonzero(ok)[np.argmin(d2[ok])]
+            j = vertex[entries[e]]
+            tilt = [np.abs(d[e] @ nrm) / np.sqrt(d2[e]) for nrm in (query_normals[q], normals[j])]
+            # within BRIDGE_TILT of both tangent planes (a NaN normal refuses nothing)
+            across = any(t > np.sin(BRIDGE_TILT) for t in tilt)
+            expected = -1 if across else j
+            refused += across
         assert got[q] == expected, q
+    assert 3 < refused < 30                            # both outcomes are exercised
 
 
 def test_unoriented_given_normals_are_named_in_the_orientation_note():
@@ -505,3 +523,25 @@ def test_given_normals_far_off_the_surface_get_no_estimate(tmp_path, capsys):
     err = capsys.readouterr().err
     assert code != 0 and "given normals are unusable" in err and "--normals estimate" in err, err
     assert not (tmp_path / "out.ply").exists()
+
+
+def test_a_sphere_above_a_floor_takes_its_own_sign():
+    """A unit sphere of 8000 random points 0.1 above a floor of 40k (the default radius,
+    0.22, reaches across the gap): the bridge between the two pieces of the spanning tree's
+    graph ran from the sphere's bottom straight down, across the gap, and the sphere took the
+    floor's side, inward (k = -1 on 97 % of its points, all valid). Now the sphere is a piece
+    of its own, closed, outward; the floor faces +z; every point farther than the radius from
+    the other surface is exact. The 1052 points nearer (balls holding both surfaces, their
+    plane-fit normals tilted) are not: 381 WRAPS_AROUND, 669 of the others more than 0.1 off."""
+    from scipy.spatial import cKDTree
+    rng = np.random.default_rng(0)
+    sphere = meshcurv.surfaces.sphere(1.0, sampling="random", n=8000, seed=1).vertices
+    sphere = sphere + [0.0, 0.0, 1.1]
+    floor = np.column_stack([rng.uniform(-4, 4, (40_000, 2)), np.zeros(40_000)])
+    res = meshcurv.principal_curvatures(np.vstack([sphere, floor]))
+    assert "outward (closed surface) on 1 piece of 8000 points" in res.orientation
+    apart = np.r_[cKDTree(floor).query(sphere)[0], cKDTree(sphere).query(floor)[0]] > res.radius
+    k = np.r_[np.ones(len(sphere)), np.zeros(len(floor))]
+    assert res.valid[apart].all()
+    assert np.abs(res.k1 - k)[apart].max() < 1e-9 and np.abs(res.k2 - k)[apart].max() < 1e-9
+    assert np.all(res.normals[len(sphere):][apart[len(sphere):], 2] > 0.99)

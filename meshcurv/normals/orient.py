@@ -46,7 +46,15 @@ __all__ = ["orient_like", "orient_towards", "orient_along", "orient_mst", "piece
            "sample_areas", "nearest_areas",
            "orientation_note", "CLOSED_MEAN_NORMAL", "SIDEWAYS_MEAN_NORMAL_Z", "PIECE_RULES",
            "nearest_in_lists", "orient_spanning_tree", "graph_pieces",
-           "nearest_in_other_piece"]
+           "nearest_in_other_piece", "BRIDGE_TILT"]
+
+# Largest angle (radians) between the tangent plane of either end and a bridge joining two
+# pieces of the spanning tree's graph (:func:`nearest_in_other_piece`): gaps in the sampling
+# of one surface are bridged along it (a curved surface's own points lie within about
+# k |d| / 2 of it, under 30 degrees in balls that do not reach around); two surfaces stacked
+# across a gap (an object above a floor) are not, so that each piece takes its own sign.
+BRIDGE_TILT = math.radians(45.0)
+BRIDGE_ACROSS = math.sin(BRIDGE_TILT)
 
 # A connected piece whose mean unit normal |sum n| / count is shorter than this is closed:
 # halfway (in ratio) between a closed cloud's sampling error (~1 / sqrt(n), 0.01 at 10k
@@ -374,15 +382,21 @@ def graph_pieces(neighbors):
 
 
 @njit(parallel=True, cache=True)
-def nearest_in_other_piece(points, query_points, indptr, indices, vertex, labels, own):
+def nearest_in_other_piece(points, query_points, indptr, indices, vertex, labels, own,
+                           normals, query_normals):
     """For each query point, the vertex (``vertex[j]`` of list entry j, an index into
     ``labels``) nearest to it in its CSR list whose piece ``labels[...]`` differs from the
-    query's ``own[q]``; -1 where the list holds none. Points coinciding with the query point
-    are left out (as :func:`nearest_in_lists` does). Returns (m,) int32."""
+    query's ``own[q]``, where that vertex lies within :data:`BRIDGE_TILT` of the tangent
+    plane of both (``query_normals`` (m, 3) and ``normals`` (n, 3) by vertex, unit, either
+    sign; a NaN normal does not refuse); -1 where the list holds none or the nearest lies
+    across a gap (the next nearest, slanting, would be no better). Points coinciding with
+    the query point are left out (as :func:`nearest_in_lists` does). Returns (m,) int32."""
     m = query_points.shape[0]
     out = np.full(m, -1, dtype=np.int32)
+    across2 = BRIDGE_ACROSS * BRIDGE_ACROSS
     for q in prange(m):
         best = np.inf
+        d = np.zeros(3)
         for e in range(indptr[q], indptr[q + 1]):
             i = indices[e]
             if labels[vertex[i]] == own[q]:
@@ -394,6 +408,13 @@ def nearest_in_other_piece(points, query_points, indptr, indices, vertex, labels
             if dd > 0.0 and dd < best:
                 best = dd
                 out[q] = vertex[i]
+                d[0], d[1], d[2] = d0, d1, d2
+        j = out[q]
+        if j >= 0:
+            hq = d[0] * query_normals[q, 0] + d[1] * query_normals[q, 1] + d[2] * query_normals[q, 2]
+            hj = d[0] * normals[j, 0] + d[1] * normals[j, 1] + d[2] * normals[j, 2]
+            if hq * hq > across2 * best or hj * hj > across2 * best:
+                out[q] = -1                 # stacked: across a gap between two surfaces
     return out
 
 

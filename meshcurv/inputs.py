@@ -11,8 +11,8 @@ def as_arrays(vertices, faces=None, normals=None):
 
     ``v`` (n, 3) float64 contiguous; ``f`` (m, 3) int64 with indices in 0..n-1, or None (also
     for an empty face list: the points are then a cloud; quads (m, 4) come split in two
-    triangles each, as ``trimesh.geometry.triangulate_quads`` splits them); ``nv`` (n, 3) float64, or None. A
-    trimesh.Trimesh supplies vertices and faces, a trimesh.PointCloud its points (a
+    triangles each, as ``trimesh.geometry.triangulate_quads`` splits them); ``nv`` (n, 3)
+    float64, or None. A trimesh.Trimesh supplies vertices and faces, a trimesh.PointCloud its points (a
     trimesh.Scene is refused: it is no one surface). Raises ValueError (one line) for wrong
     shapes, complex numbers, non-integer faces and face indices out of range.
     """

@@ -411,8 +411,11 @@ def nearest_in_other_piece(points, query_points, indptr, indices, vertex, labels
                 d[0], d[1], d[2] = d0, d1, d2
         j = out[q]
         if j >= 0:
-            hq = d[0] * query_normals[q, 0] + d[1] * query_normals[q, 1] + d[2] * query_normals[q, 2]
-            hj = d[0] * normals[j, 0] + d[1] * normals[j, 1] + d[2] * normals[j, 2]
+            hq = 0.0
+            hj = 0.0
+            for c in range(3):
+                hq += d[c] * query_normals[q, c]
+                hj += d[c] * normals[j, c]
             if hq * hq > across2 * best or hj * hj > across2 * best:
                 out[q] = -1                 # stacked: across a gap between two surfaces
     return out

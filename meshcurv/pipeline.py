@@ -565,10 +565,11 @@ def bridged_graph(v, nv, graph, search, block=BLOCK):
     the point's own line: rings 0.1 apart with 1000 points each on a unit sphere, 20 % wrong);
     each piece then took its sign alone. Pieces farther apart than the radius (separate
     objects) stay apart, and so do pieces stacked across a gap narrower than it: a unit
-    sphere 0.02-0.1 above a floor of random points was joined to it and took the floor's
-    side, inward (k = -1 on 97 % of its points, all valid); now it is a piece of its own,
-    closed, outward. Where its points touch the floor the nearest neighbours join the two
-    still (see :func:`meshcurv.normals.orient.orient_mst`)."""
+    sphere 0.1 above a floor of random points was joined to it and took the floor's side,
+    inward (k = -1 on 97 % of its points, all valid); now it is a piece of its own, closed,
+    outward. Where it touches the floor, or comes nearer than the spacing of the points
+    (0.02 of a spacing of 0.04 there), the nearest neighbours join the two still, and it
+    comes out inward."""
     labels = orient.graph_pieces(graph)
     columns = [graph]
     vertex = search.rank if search.rank is not None else np.arange(len(v))

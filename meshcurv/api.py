@@ -6,8 +6,6 @@ curvature by :mod:`meshcurv.coarse` where the input is coarse for its shape or i
 are limited by its sampling.
 """
 
-from dataclasses import replace
-
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -15,7 +13,7 @@ from . import coarse as coarse_mls, pipeline, scale as scale_select, weld
 from .inputs import as_arrays
 from .neighbors import MAX_BALL_FRACTION, default_radius, power_of_two_scale
 from .options import Options, resolve_plan
-from .result import Status
+from .result import Status, mls_shares
 from .weld import expand_rows
 
 __all__ = ["principal_curvatures", "estimate_normals", "no_estimate_reason"]
@@ -29,9 +27,6 @@ WRAP_FACTORS = (0.5, 0.25, 0.125, 0.0625)
 # a whole part narrower than itself (a surface patch keeps about a quarter when the radius
 # halves, a tube's segment half).
 WHOLE_PART = 0.75
-# A result's per-row arrays that a smaller ball's estimate replaces.
-_ROW_FIELDS = ("k1", "k2", "d1", "d2", "normals", "valid", "n_neighbors", "n_samples",
-               "residual", "noise", "status", "outlier_score")
 
 
 def _check_query(query, n):
@@ -347,13 +342,7 @@ def _smaller_balls(res, v, f, given_normals, query, plan, progress):
     if (not len(rows) or not plan.sparse_retry
             or pipeline.side_normals_estimated(plan, f is not None)):
         return res
-    names = [name for name in _ROW_FIELDS if getattr(res, name) is not None]
-    out = {name: getattr(res, name).copy() for name in names}
-    out["radius_used"] = np.where(res.valid, res.radius, np.nan) if res.radius_used is None \
-        else res.radius_used.copy()
-    share = None if res.mls_share is None else res.mls_share.copy()
-    finite = np.isfinite(v).all(axis=1)
-    tree = cKDTree(v[finite])
+    tree = cKDTree(v[np.isfinite(v).all(axis=1)])
     held = tree.query_ball_point(v[query[rows]], res.radius, return_length=True)
     for factor in WRAP_FACTORS:
         r = res.radius * factor
@@ -361,23 +350,24 @@ def _smaller_balls(res, v, f, given_normals, query, plan, progress):
         # (a surface's ball keeps a quarter, a tube's half) and would reach around it too
         now = tree.query_ball_point(v[query[rows]], r, return_length=True)
         tried = now <= WHOLE_PART * held
-        if not tried.any():
-            held = now
-            continue
-        sub = _at_radius(v, f, given_normals, r, query[rows[tried]], plan, progress, False)
-        done = np.zeros(len(rows), dtype=bool)
-        done[tried] = sub.status == Status.OK
-        sub = expand_rows(sub, np.cumsum(tried)[done] - 1)
-        for name in names:
-            out[name][rows[done]] = getattr(sub, name)
-        out["radius_used"][rows[done]] = r if sub.radius_used is None else sub.radius_used
-        if sub.mls_share is not None:
-            share = np.zeros(len(res)) if share is None else share
-            share[rows[done]] = sub.mls_share
-        rows, held = rows[~done], now[~done]
+        if tried.any():
+            sub = _at_radius(v, f, given_normals, r, query[rows[tried]], plan, progress, False)
+            done = np.zeros(len(rows), dtype=bool)
+            done[tried] = sub.status == Status.OK
+            # the sub-result's rows spread over res's (row 0 where not tried: never chosen)
+            at = np.zeros(len(res), dtype=np.int64)
+            at[rows[tried]] = np.arange(len(sub))
+            choice = np.zeros(len(res), dtype=np.int64)
+            choice[rows[done]] = 1
+            merged = scale_select.assemble([res, expand_rows(sub, at)], choice)
+            if sub.mls_share is not None:
+                merged.mls_share = mls_shares(res).copy()
+                merged.mls_share[rows[done]] = sub.mls_share[done[tried]]
+            res, rows, now = merged, rows[~done], now[~done]
+        held = now
         if not len(rows):
             break
-    return replace(res, **out, mls_share=share)
+    return res
 
 
 def _blended(v, f, given_normals, radii, query, plan, progress, coarse):

@@ -12,9 +12,9 @@ def as_arrays(vertices, faces=None, normals=None):
     ``v`` (n, 3) float64 contiguous; ``f`` (m, 3) int64 with indices in 0..n-1, or None (also
     for an empty face list: the points are then a cloud; quads (m, 4) come split in two
     triangles each, as ``trimesh.geometry.triangulate_quads`` splits them); ``nv`` (n, 3)
-    float64, or None. A trimesh.Trimesh supplies vertices and faces, a trimesh.PointCloud its points (a
-    trimesh.Scene is refused: it is no one surface). Raises ValueError (one line) for wrong
-    shapes, complex numbers, non-integer faces and face indices out of range.
+    float64, or None. A trimesh.Trimesh supplies vertices and faces, a trimesh.PointCloud its
+    points (a trimesh.Scene is refused: it is no one surface). Raises ValueError (one line)
+    for wrong shapes, complex numbers, non-integer faces and face indices out of range.
     """
     if hasattr(vertices, "geometry") and hasattr(vertices, "graph"):
         count = len(vertices.geometry)
@@ -39,11 +39,9 @@ def as_arrays(vertices, faces=None, normals=None):
         if f.ndim != 2 or f.shape[1] not in (3, 4):
             raise ValueError(f"faces must be an (m, 3) integer array of triangles (or (m, 4) "
                              f"of quads), got shape {f.shape}")
-        if f.dtype == bool or not np.issubdtype(f.dtype, np.number):
+        if (f.dtype == bool or not np.issubdtype(f.dtype, np.number)
+                or not (np.issubdtype(f.dtype, np.integer) or np.all(np.mod(f, 1) == 0))):
             raise ValueError(f"faces must hold integer vertex indices, got {f.dtype}")
-        if not np.issubdtype(f.dtype, np.integer):
-            if not np.all(np.mod(f, 1) == 0):
-                raise ValueError("faces must hold integer vertex indices")
         f = f.astype(np.int64, copy=False)
         if f.size and (f.min() < 0 or f.max() >= len(v)):
             hint = (" (numbered from 1, as in OBJ files? pass faces - 1)"

@@ -133,10 +133,9 @@ def beyond_a_cap(points, xb, indptr, indices, radius, point_weights=None):
     1/2, 2, 17 and 1 of them marked; none at the default radius (the test at radius / sqrt 2
     added 5 rows of torus_050000 there, no row of the other CNC clouds, of the terrains, of
     the falling-density half sphere or of the sphere with spikes in ``docs/accuracy_cases``).
-    At a border, noise as wide
-    as the half-ball can pass for a round section: squares with noise of 0.2 and 0.5 of the
-    radius, 3 and 1 border rows of 40k marked with balls of ~800 points; 0.2 and 0.3, 4 and
-    13 of 3000 with ~60 (none a radius from the border)."""
+    At a border, noise as wide as the half-ball can pass for a round section: squares with
+    noise of 0.2 and 0.5 of the radius, 3 and 1 border rows of 40k marked with balls of ~800
+    points; 0.2 and 0.3, 4 and 13 of 3000 with ~60 (none a radius from the border)."""
     ev = ball_spread(points, xb, indptr, indices, radius, point_weights)
     with np.errstate(invalid="ignore", divide="ignore"):
         flat = ev[:, 0] / ev[:, 1]

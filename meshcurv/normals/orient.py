@@ -396,7 +396,7 @@ def nearest_in_other_piece(points, query_points, indptr, indices, vertex, labels
     across2 = BRIDGE_ACROSS * BRIDGE_ACROSS
     for q in prange(m):
         best = np.inf
-        d = np.zeros(3)
+        e0 = e1 = e2 = 0.0                      # the offset to the nearest
         for e in range(indptr[q], indptr[q + 1]):
             i = indices[e]
             if labels[vertex[i]] == own[q]:
@@ -408,14 +408,11 @@ def nearest_in_other_piece(points, query_points, indptr, indices, vertex, labels
             if dd > 0.0 and dd < best:
                 best = dd
                 out[q] = vertex[i]
-                d[0], d[1], d[2] = d0, d1, d2
+                e0, e1, e2 = d0, d1, d2
         j = out[q]
         if j >= 0:
-            hq = 0.0
-            hj = 0.0
-            for c in range(3):
-                hq += d[c] * query_normals[q, c]
-                hj += d[c] * normals[j, c]
+            hq = e0 * query_normals[q, 0] + e1 * query_normals[q, 1] + e2 * query_normals[q, 2]
+            hj = e0 * normals[j, 0] + e1 * normals[j, 1] + e2 * normals[j, 2]
             if hq * hq > across2 * best or hj * hj > across2 * best:
                 out[q] = -1                 # stacked: across a gap between two surfaces
     return out

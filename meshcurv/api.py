@@ -334,10 +334,10 @@ def _smaller_balls(res, v, f, given_normals, query, plan, progress):
     weighs more there, as it would in that call); the others keep their status.
 
     Only with ``sparse_retry``, and where the folding test reads normals not estimated over
-    the balls (a mesh's faces', or normals given and used as they are): plane fits over a
-    ball 2.2-4 times wider than a tube pass the shape test of clouds
-    (:func:`meshcurv.fit.wrap.beyond_a_cap`), so there a smaller ball could serve a wrong
-    estimate as valid."""
+    the balls (a mesh's faces', or normals given and used as they are): a cloud's plane fits
+    leave only the balls' shape test (:func:`meshcurv.fit.wrap.beyond_a_cap`), which still
+    passes some balls about 2.8 times wider than a tube (9 % of a pole's rows), so there a
+    smaller ball could serve a wrong estimate as valid."""
     rows = np.flatnonzero(res.status == Status.WRAPS_AROUND)
     if (not len(rows) or not plan.sparse_retry
             or pipeline.side_normals_estimated(plan, f is not None)):

@@ -255,7 +255,8 @@ class Options:
         surface (``WRAPS_AROUND``: a small part beside a large one, a thin tube) are
         estimated at 1/2, 1/4, 1/8 and 1/16 of ``radius``, each at the largest that serves,
         as a call at that radius would estimate them (clouds with estimated normals keep
-        ``WRAPS_AROUND``: a ball 2.2-4 times wider than a tube passes their shape test).
+        ``WRAPS_AROUND``: their shape test still passes some balls about 2.8 times wider
+        than a tube, where a smaller ball could land).
         ``result.n_neighbors`` is the count of the ball used, ``result.radius_used`` its
         radius; ``result.radius`` stays the call's. A radius list and ``radius="auto"``
         retry sparse rows only. False: every vertex at ``radius`` alone (tiled runs, whose

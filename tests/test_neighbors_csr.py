@@ -151,3 +151,24 @@ def test_crowd_thinning_keeps_the_thin_surface_and_limits_each_small_cell_of_a_c
     crowded = size > limit
     assert crowded.any() and (served[crowded] == limit).all()
     assert kept[:40000][~crowded[small[:40000]]].all()            # the thin surface serves
+
+
+def test_ball_max_takes_the_largest_finite_value_inside_each_ball_as_numpy_does():
+    """The kernel against its numpy specification: the largest of ``values`` over the entries
+    :func:`count_within` would count with each list's own squared radius, NaN values left
+    out, NaN for a list with no finite value inside its ball."""
+    rng, indptr, indices = _random_lists(5, longest=40, n=300)
+    points = rng.uniform(-1.0, 1.0, (300, 3))
+    values = np.where(rng.uniform(size=300) < 0.2, np.nan, rng.normal(size=300))
+    centres = points[rng.integers(0, 300, len(indptr) - 1)]
+    owner = np.repeat(np.arange(len(centres)), np.diff(indptr))
+    d2 = np.sum((points[indices] - centres[owner]) ** 2, axis=1)
+    r2max = rng.choice([0.0, 0.1, 0.5, 12.0], size=len(centres))
+    inside = (d2 > 0.0) & (d2 <= r2max[owner]) & np.isfinite(values[indices])
+    expected = np.full(len(centres), -np.inf)
+    np.maximum.at(expected, owner[inside], values[indices[inside]])
+    expected[np.isneginf(expected)] = np.nan
+    out = np.empty(len(centres))
+    csr.ball_max(points, centres, indptr, indices, r2max, values, out)
+    np.testing.assert_array_equal(out, expected)
+    assert np.isnan(out).any() and np.isfinite(out).sum() > len(out) // 2

@@ -133,3 +133,19 @@ def ball_mean(points, centres, indptr, indices, r2max, values, mean, weights=Non
                         mean[i, a] += w * values[j, a]
         for a in range(c):
             mean[i, a] = mean[i, a] / total if total > 0.0 else np.nan
+
+
+@njit(parallel=True, cache=True)
+def ball_max(points, centres, indptr, indices, r2max, values, out):
+    """Largest finite entry of ``values`` ((n,), per row of ``points``) over the entries of
+    each list within its own ball, as :func:`count_within` counts them but with a squared
+    radius per list (``r2max`` (m,), model units squared), into ``out`` ((m,); NaN where the
+    ball holds no finite value)."""
+    m = centres.shape[0]
+    for i in prange(m):
+        top = -np.inf
+        for e in range(indptr[i], indptr[i + 1]):
+            j = indices[e]
+            if values[j] > top and _in_ball(points, j, centres, i, r2max[i]):
+                top = values[j]
+        out[i] = top if top > -np.inf else np.nan

@@ -369,25 +369,30 @@ def mls_rows(result, rows, v, normals, point_weights, h, search, unit=1.0, block
     """
     m = len(rows)
     scale = NOISE_SCALE * result.radius
-    if noise is not None:
-        noise = support_noise(rows, v, noise, h, search, ROUGH_NOISE * scale, block)
-    share = clean_fraction(result.noise if noise is None else noise, scale)
     valid = np.asarray(result.valid)
     if out is None:
         out = {name: np.empty(np.shape(getattr(result, name))) for name in BLENDED}
     # a block at a time: the MLS fields of one block alive at once
     curvatures = "k1" in out
+    if noise is not None:
+        with np.errstate(invalid="ignore"):
+            rough = np.where(noise >= ROUGH_NOISE * scale, noise, np.nan)
     for lo in range(0, m, block):
         sl = slice(lo, min(m, lo + block))
+        idx = rows[sl]
+        lists = search(idx)
+        row_noise = result.noise[sl] if noise is None else \
+            support_noise(idx, v, noise, rough, h[sl], lists)
+        # the block's lists serve its one MLS block
         if curvatures:
-            k1, k2, d1, d2, n = _mls_curvatures(rows[sl], v, normals, result.normals[sl],
-                                                h[sl], search, point_weights, unit, block)
+            k1, k2, d1, d2, n = _mls_curvatures(idx, v, normals, result.normals[sl], h[sl],
+                                                lambda _: lists, point_weights, unit, block)
             use = valid[sl] & np.isfinite(k1) & np.isfinite(k2)
         else:
-            n = _mls_normals(rows[sl], v, normals, result.normals[sl], h[sl], search,
+            n = _mls_normals(idx, v, normals, result.normals[sl], h[sl], lambda _: lists,
                              point_weights, block)
             use = valid[sl] & np.isfinite(n).all(axis=1)
-        g = np.where(use, share[sl], 0.0)
+        g = np.where(use, clean_fraction(row_noise, scale), 0.0)
         # directions and normal: the larger share's
         mls_side = (g >= 0.5)[:, None]
         if "mls_share" in out:
@@ -401,11 +406,12 @@ def mls_rows(result, rows, v, normals, point_weights, h, search, unit=1.0, block
     return out
 
 
-def support_noise(rows, v, noise, h, search, rough, block=BLOCK):
+def support_noise(rows, v, noise, rough, h, lists):
     """The noise (m,) that sets the MLS share of the vertex indices ``rows``: the largest
-    of ``noise`` ((n,), model units) at the row and at the points within its support ``h``
-    ((m,), in the units of ``v``) whose noise reaches ``rough`` (model units); NaN where the
-    row's own is (arguments as :func:`mls_rows`).
+    of ``noise`` ((n,), model units) at the row and of ``rough`` ((n,), the noise of the
+    rough points, NaN elsewhere) at the points within its support ``h`` ((m,), in the units
+    of ``v``); NaN where the row's own is. ``lists``: CSR ``(indptr, indices)`` about the
+    rows, holding every vertex within ``h`` (arguments as :func:`mls_rows`).
 
     The MLS surface of a row is smooth over its whole support: where that reaches a sharp
     edge (the local jet's residual there 0.03-0.05 of the radius, against 1e-4 on the faces
@@ -415,13 +421,7 @@ def support_noise(rows, v, noise, h, search, rough, block=BLOCK):
     with each row's own noise: 0.50 at 1-1.5 radii from the edge, 0.12 at 1.5-2, 0.14 on
     the caps (the circle fits alone: 0.016 and 0)."""
     top = np.empty(len(rows))
-    with np.errstate(invalid="ignore"):
-        rough_noise = np.where(noise >= rough, noise, np.nan)
-    for lo in range(0, len(rows), block):
-        sl = slice(lo, min(len(rows), lo + block))
-        idx = rows[sl]
-        indptr, indices = search(idx)
-        ball_max(v, v[idx], indptr, indices, h[sl] * h[sl], rough_noise, top[sl])
+    ball_max(v, v[rows], *lists, h * h, rough, top)
     # NaN at the row stays (no share); NaN neighbours are left out
     return np.maximum(noise[rows], np.where(np.isnan(top), -np.inf, top))
 

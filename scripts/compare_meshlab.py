@@ -498,7 +498,8 @@ def _reindex(faces, used):
 # Accuracy cases (--accuracy-cases): one group at a time, each against exact curvature
 # ---------------------------------------------------------------------------------------------
 
-ACCURACY_GROUPS = ("surfaces", "cnc", "density", "icosahedra", "coarse", "spikes", "terrain")
+ACCURACY_GROUPS = ("surfaces", "cnc", "density", "icosahedra", "coarse", "decimated", "spikes",
+                   "terrain")
 MESHLAB_NAMES = tuple(MESHLAB_METHODS)
 
 # CNC reference: mean |H - H_true| over the six clouds, the authors' code (Avg-Hexagram,
@@ -846,6 +847,77 @@ def group_coarse(methods, size, switches, timeout, **_):
     return rows
 
 
+# Meshes decimated by MeshLab's quadric edge collapse (the mesh, the share of its faces
+# kept): the torus 2 / 0.5 of 240 x 60 and the ellipsoid 2 / 1.5 / 1 of 40962 vertices.
+DECIMATED = (("torus", 0.2), ("torus", 0.05), ("ellipsoid", 0.1), ("ellipsoid", 0.02))
+
+
+def ellipsoid_at(points, semi_axes=(2.0, 1.5, 1.0)):
+    """Exact geometry of the ellipsoid of ``semi_axes`` at its points nearest ``points`` (n, 3)
+    (Newton steps onto x^2/a^2 + y^2/b^2 + z^2/c^2 = 1): a faceless
+    :class:`meshcurv.surfaces.Surface` holding the projected points."""
+    from meshcurv import surfaces
+
+    inv2 = 1.0 / np.asarray(semi_axes, dtype=np.float64) ** 2
+
+    def function(x):
+        hess = np.broadcast_to(np.diag(2.0 * inv2), (len(x), 3, 3))
+        return np.sum(x * x * inv2, axis=1) - 1.0, 2.0 * x * inv2, hess
+
+    v = surfaces.project_to_implicit(points, function)
+    normals, k1, k2, d1, d2 = surfaces.implicit_curvature(*function(v)[1:])
+    return surfaces.Surface("ellipsoid", v, np.zeros((0, 3), np.int64), normals, k1, k2, d1,
+                            d2, np.full(len(v), np.inf))
+
+
+def decimated_mesh(shape, keep):
+    """(vertices, faces, truth): the torus 2 / 0.5 (240 x 60) or the ellipsoid 2 / 1.5 / 1
+    (icosphere of 40962 vertices) decimated by MeshLab's quadric edge collapse to ``keep`` of
+    its faces (normals preserved); the truth at each vertex's projection onto the surface."""
+    import pymeshlab
+
+    from meshcurv import surfaces
+
+    s = surfaces.torus(2.0, 0.5, 240, 60) if shape == "torus" else \
+        surfaces.ellipsoid((2.0, 1.5, 1.0), 6)
+    ms = pymeshlab.MeshSet()
+    ms.add_mesh(pymeshlab.Mesh(s.vertices, s.faces))
+    ms.meshing_decimation_quadric_edge_collapse(targetfacenum=int(keep * len(s.faces)),
+                                                preservenormal=True)
+    m = ms.current_mesh()
+    v = np.asarray(m.vertex_matrix(), dtype=np.float64)
+    f = np.asarray(m.face_matrix(), dtype=np.int64)
+    truth = surfaces.torus_at(v, 2.0, 0.5) if shape == "torus" else ellipsoid_at(v)
+    return v, f, truth
+
+
+def group_decimated(methods, size, switches, timeout, **_):
+    """Meshes decimated by MeshLab (:data:`DECIMATED`): irregular triangles, denser where the
+    surface is more curved. meshcurv at its default radius with the faces and on the points
+    alone; MeshLab on the mesh, SDQF and APSS at meshcurv's radius for the mesh. Errors over
+    all vertices."""
+    from meshcurv.neighbors import default_radius
+
+    rows = []
+    for shape, keep in DECIMATED[::2] if size == "smallest" else DECIMATED:
+        v, f, truth = decimated_mesh(shape, keep)
+        everywhere = np.ones(len(v), dtype=bool)
+        case = f"{shape}, decimated to {keep * 100:g} % ({len(v)} vertices)"
+        runs = [("meshcurv", "meshcurv, mesh", f), ("meshcurv", "meshcurv, points", None)] \
+            if "meshcurv" in methods else []
+        runs += [(m, m, f) for m in _selected(methods) if m != "meshcurv"]
+        ball = float(default_radius(v, faces=f))
+        for method, label, faces in runs:
+            r = _run(method, v, faces, None if method == "meshcurv" else ball, switches,
+                     timeout)
+            rows.append(dict(group="decimated", case=case, method=label, radius=r["radius"],
+                             seconds=r["seconds"], status=r["status"],
+                             **_curvature_row(r["k1"], r["k2"], truth, everywhere)))
+        print(f"decimated {case}: " + ", ".join(f"{r['method']} {r['mean_dk']:.3g}"
+                                                for r in rows[-len(runs):]), flush=True)
+    return rows
+
+
 def sphere_with_spikes(subdivisions=5, noise=0.0005, spike_share=0.02, spike_range=(0.01, 0.04),
                        seed=SEED_SPIKES):
     """An icosphere (unit radius) with Gaussian noise along the normal (``noise`` x the
@@ -928,8 +1000,8 @@ def group_terrain(methods, size, switches, timeout, **_):
 
 
 GROUP_RUNNERS = {"surfaces": group_surfaces, "cnc": group_cnc, "density": group_density,
-                 "icosahedra": group_icosahedra, "coarse": group_coarse, "spikes": group_spikes,
-                 "terrain": group_terrain}
+                 "icosahedra": group_icosahedra, "coarse": group_coarse,
+                 "decimated": group_decimated, "spikes": group_spikes, "terrain": group_terrain}
 
 
 def _git_commit():
@@ -1043,6 +1115,16 @@ GROUP_TEXT = {
                "reaches around it. meshcurv at its default radius with the faces and on the "
                "points alone; MeshLab on the mesh, SDQF and APSS at meshcurv's radius for the "
                "mesh. Errors over all vertices against the exact torus."),
+    "decimated": ("Meshes decimated by MeshLab",
+                  "The torus 2 / 0.5 of 240 x 60 vertices (`meshcurv.surfaces.torus`) and the "
+                  "ellipsoid 2 / 1.5 / 1 of 40962 vertices (`meshcurv.surfaces.ellipsoid`, "
+                  "icosphere of 6 subdivisions) decimated by pymeshlab's "
+                  "`meshing_decimation_quadric_edge_collapse` (normals preserved) to the share "
+                  "of their faces the case gives: irregular triangles, denser where the surface "
+                  "is more curved, vertices up to ~0.002 off the surface. Truth at each "
+                  "vertex's projection onto the exact surface. meshcurv at its default radius "
+                  "with the faces and on the points alone; MeshLab on the mesh, SDQF and APSS "
+                  "at meshcurv's radius for the mesh. Errors over all vertices."),
     "terrain": ("Airborne-scan-like terrains",
                 "z = 0.03 x^2 - 0.02 y^2 + 0.1 sin(2 pi x / wavelength) on [-10, 10]^2, "
                 "gentle (wavelength 4 pi, ~19 default radii) and bumpy (wavelength 3, ~4.5 "
@@ -1068,7 +1150,7 @@ GROUP_TEXT = {
 def _summary(results):
     """Markdown rows: per case of the mesh groups, meshcurv against the best MeshLab method."""
     out = []
-    for group in ("surfaces", "coarse", "spikes"):
+    for group in ("surfaces", "coarse", "decimated", "spikes"):
         rows = results.get(group, [])
         keys = list(dict.fromkeys((r["case"], r.get("noise")) for r in rows))
         for case, noise in keys:

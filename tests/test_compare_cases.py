@@ -172,6 +172,8 @@ def test_smallest_configuration_of_every_group_runs(tmp_path):
     assert results["coarse"][0]["method"] == "meshcurv, mesh"
     assert results["coarse"][0]["mean_dk"] < 0.01
     assert {r["method"] for r in results["spikes"]} == {"meshcurv, mesh", "meshcurv, points"}
+    assert len(results["decimated"]) == 4                       # 2 meshes x (mesh, points)
+    assert all(r["valid"] == 1.0 and r["mean_dk"] < 0.05 for r in results["decimated"])
     if CNC_DIR:
         modes = {(r["method"], r["radius_rule"]) for r in results["cnc"]}
         assert len(modes) == 4 and len(results["cnc"]) == 2 * 4   # files x modes

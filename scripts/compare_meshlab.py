@@ -820,7 +820,6 @@ def group_coarse(methods, size, switches, timeout, **_):
     meshcurv's radius for the mesh."""
     import trimesh
 
-    from meshcurv.neighbors import default_radius
     from meshcurv.surfaces import torus_at
 
     rows = []
@@ -830,20 +829,30 @@ def group_coarse(methods, size, switches, timeout, **_):
         v = np.asarray(mesh.vertices, dtype=np.float64)
         f = np.asarray(mesh.faces, dtype=np.int64)
         truth = torus_at(v, major, minor)
-        everywhere = np.ones(len(v), dtype=bool)
         case = f"torus {major:g} / {minor:g}, {n_major} x {n_minor} ({len(v)} vertices)"
-        runs = [("meshcurv", "meshcurv, mesh", f), ("meshcurv", "meshcurv, points", None)] \
-            if "meshcurv" in methods else []
-        runs += [(m, m, f) for m in _selected(methods) if m != "meshcurv"]
-        ball = float(default_radius(v, faces=f))    # meshcurv's default radius for the mesh
-        for method, label, faces in runs:
-            r = _run(method, v, faces, None if method == "meshcurv" else ball, switches,
-                     timeout)
-            rows.append(dict(group="coarse", case=case, method=label, radius=r["radius"],
-                             seconds=r["seconds"], status=r["status"],
-                             **_curvature_row(r["k1"], r["k2"], truth, everywhere)))
-        print(f"coarse {case}: " + ", ".join(f"{r['method']} {r['mean_dk']:.3g}"
-                                             for r in rows[-len(runs):]), flush=True)
+        rows += _mesh_and_points_rows("coarse", case, v, f, truth, methods, switches, timeout)
+    return rows
+
+
+def _mesh_and_points_rows(group, case, v, f, truth, methods, switches, timeout):
+    """Rows of one mesh of a group: meshcurv at its default radius with the faces and on the
+    points alone, MeshLab's ``methods`` on the mesh (SDQF and APSS at meshcurv's default
+    radius for the mesh); errors over all vertices."""
+    from meshcurv.neighbors import default_radius
+
+    everywhere = np.ones(len(v), dtype=bool)
+    runs = [("meshcurv", "meshcurv, mesh", f), ("meshcurv", "meshcurv, points", None)] \
+        if "meshcurv" in methods else []
+    runs += [(m, m, f) for m in _selected(methods) if m != "meshcurv"]
+    ball = float(default_radius(v, faces=f))    # meshcurv's default radius for the mesh
+    rows = []
+    for method, label, faces in runs:
+        r = _run(method, v, faces, None if method == "meshcurv" else ball, switches, timeout)
+        rows.append(dict(group=group, case=case, method=label, radius=r["radius"],
+                         seconds=r["seconds"], status=r["status"],
+                         **_curvature_row(r["k1"], r["k2"], truth, everywhere)))
+    print(f"{group} {case}: " + ", ".join(f"{r['method']} {r['mean_dk']:.3g}" for r in rows),
+          flush=True)
     return rows
 
 
@@ -896,25 +905,12 @@ def group_decimated(methods, size, switches, timeout, **_):
     surface is more curved. meshcurv at its default radius with the faces and on the points
     alone; MeshLab on the mesh, SDQF and APSS at meshcurv's radius for the mesh. Errors over
     all vertices."""
-    from meshcurv.neighbors import default_radius
-
     rows = []
     for shape, keep in DECIMATED[::2] if size == "smallest" else DECIMATED:
         v, f, truth = decimated_mesh(shape, keep)
-        everywhere = np.ones(len(v), dtype=bool)
         case = f"{shape}, decimated to {keep * 100:g} % ({len(v)} vertices)"
-        runs = [("meshcurv", "meshcurv, mesh", f), ("meshcurv", "meshcurv, points", None)] \
-            if "meshcurv" in methods else []
-        runs += [(m, m, f) for m in _selected(methods) if m != "meshcurv"]
-        ball = float(default_radius(v, faces=f))
-        for method, label, faces in runs:
-            r = _run(method, v, faces, None if method == "meshcurv" else ball, switches,
-                     timeout)
-            rows.append(dict(group="decimated", case=case, method=label, radius=r["radius"],
-                             seconds=r["seconds"], status=r["status"],
-                             **_curvature_row(r["k1"], r["k2"], truth, everywhere)))
-        print(f"decimated {case}: " + ", ".join(f"{r['method']} {r['mean_dk']:.3g}"
-                                                for r in rows[-len(runs):]), flush=True)
+        rows += _mesh_and_points_rows("decimated", case, v, f, truth, methods, switches,
+                                      timeout)
     return rows
 
 

@@ -13,7 +13,7 @@ from . import coarse as coarse_mls, pipeline, scale as scale_select, weld
 from .inputs import as_arrays
 from .neighbors import MAX_BALL_FRACTION, default_radius, power_of_two_scale
 from .options import Options, resolve_plan
-from .result import Status, mls_shares
+from .result import Status
 from .weld import expand_rows
 
 __all__ = ["principal_curvatures", "estimate_normals", "no_estimate_reason"]
@@ -359,11 +359,8 @@ def _smaller_balls(res, v, f, given_normals, query, plan, progress):
             at[rows[tried]] = np.arange(len(sub))
             choice = np.zeros(len(res), dtype=np.int64)
             choice[rows[done]] = 1
-            merged = scale_select.assemble([res, expand_rows(sub, at)], choice)
-            if sub.mls_share is not None:
-                merged.mls_share = mls_shares(res).copy()
-                merged.mls_share[rows[done]] = sub.mls_share[done[tried]]
-            res, rows, now = merged, rows[~done], now[~done]
+            res = scale_select.assemble([res, expand_rows(sub, at)], choice)
+            rows, now = rows[~done], now[~done]
         held = now
         if not len(rows):
             break

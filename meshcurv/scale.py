@@ -46,7 +46,7 @@ from scipy.spatial import cKDTree
 
 from . import pipeline
 from .neighbors import power_of_two_scale, typical_extent
-from .result import Status, oriented_like
+from .result import Status, mls_shares, oriented_like
 
 __all__ = ["ladder", "select", "run_auto", "LADDER_EXPONENTS", "NOISE_GAIN",
            "NORMAL_GAIN", "MIN_SUPPORT", "MAX_ARC", "SMOOTH_NEIGHBORS", "corrected_rows"]
@@ -190,8 +190,9 @@ def select(results, radii, points, fallback=0, smooth=SMOOTH_NEIGHBORS, normal_v
 def assemble(results, choice, base=0, at=None):
     """One CurvatureResult whose row i is row ``at[i]`` (default i) of ``results[choice[i]]``,
     ``radius_used`` included (the chosen radius, or more where the sparse retry widened that
-    row's ball; NaN where not valid); the other attributes (``radius``, ``orientation``) are
-    those of ``results[base]``."""
+    row's ball; NaN where not valid) and ``mls_share`` (0 from a result where no blend ran;
+    None where none ran); the other attributes (``radius``, ``orientation``) are those of
+    ``results[base]``."""
     rows = np.arange(len(choice)) if at is None else np.asarray(at)
     first = results[base]
     out = type(first)(**{f: getattr(first, f) for f in first.__dataclass_fields__})
@@ -201,6 +202,8 @@ def assemble(results, choice, base=0, at=None):
             continue
         stacked = np.stack([np.asarray(getattr(r, name)) for r in results])
         setattr(out, name, stacked[choice, rows].copy())
+    if any(r.mls_share is not None for r in results):
+        out.mls_share = np.stack([mls_shares(r) for r in results])[choice, rows]
     return out
 
 

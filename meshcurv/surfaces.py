@@ -12,7 +12,7 @@ import numpy as np
 from scipy.spatial import Delaunay
 
 __all__ = ["Surface", "paraboloid", "monkey_saddle", "egg_crate", "bump", "saddle",
-           "scan_terrain", "sphere", "ellipsoid", "cylinder", "torus", "torus_at",
+           "scan_terrain", "sphere", "ellipsoid", "ellipsoid_at", "cylinder", "torus", "torus_at",
            "goursat_function", "goursat_at", "implicit_curvature", "project_to_implicit",
            "add_normal_noise", "orient_faces"]
 
@@ -272,6 +272,29 @@ def ellipsoid(semi_axes=(2.0, 1.5, 1.0), subdivisions=5, sampling="regular", n=1
                                                                  (len(v), 3, 3)))
     return Surface("ellipsoid", v, orient_faces(v, unit.faces, normals), normals, k1, k2, d1,
                    d2, np.full(len(v), np.inf))
+
+
+def ellipsoid_at(points, semi_axes=(2.0, 1.5, 1.0)):
+    """Exact geometry of the ellipsoid of ``semi_axes`` (:func:`ellipsoid`) at its points
+    nearest ``points`` (n, 3) (:func:`project_to_implicit` onto x^2/a^2 + y^2/b^2 + z^2/c^2 =
+    1): a :class:`Surface` without faces holding the projected points.
+
+    Examples
+    --------
+    >>> s = ellipsoid_at([[2.1, 0.0, 0.0]])          # the end of the a axis: a/b^2, a/c^2
+    >>> s.vertices[0].tolist(), round(float(s.k1[0]), 12), round(float(s.k2[0]), 12)
+    ([2.0, 0.0, 0.0], 2.0, 0.888888888889)
+    """
+    axes = np.asarray(semi_axes, dtype=np.float64)
+
+    def function(x):
+        hess = np.broadcast_to(np.diag(2 / axes ** 2), (len(x), 3, 3))
+        return np.sum(x * x / axes ** 2, axis=1) - 1.0, 2 * x / axes ** 2, hess
+
+    v = project_to_implicit(points, function)
+    normals, k1, k2, d1, d2 = implicit_curvature(*function(v)[1:])
+    return Surface("ellipsoid", v, np.zeros((0, 3), np.int64), normals, k1, k2, d1, d2,
+                   np.full(len(v), np.inf))
 
 
 def cylinder(radius=1.0, height=4.0, n_around=200, n_along=None):

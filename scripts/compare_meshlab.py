@@ -861,24 +861,6 @@ def _mesh_and_points_rows(group, case, v, f, truth, methods, switches, timeout):
 DECIMATED = (("torus", 0.2), ("torus", 0.05), ("ellipsoid", 0.1), ("ellipsoid", 0.02))
 
 
-def ellipsoid_at(points, semi_axes=(2.0, 1.5, 1.0)):
-    """Exact geometry of the ellipsoid of ``semi_axes`` at its points nearest ``points`` (n, 3)
-    (Newton steps onto x^2/a^2 + y^2/b^2 + z^2/c^2 = 1): a faceless
-    :class:`meshcurv.surfaces.Surface` holding the projected points."""
-    from meshcurv import surfaces
-
-    inv2 = 1.0 / np.asarray(semi_axes, dtype=np.float64) ** 2
-
-    def function(x):
-        hess = np.broadcast_to(np.diag(2.0 * inv2), (len(x), 3, 3))
-        return np.sum(x * x * inv2, axis=1) - 1.0, 2.0 * x * inv2, hess
-
-    v = surfaces.project_to_implicit(points, function)
-    normals, k1, k2, d1, d2 = surfaces.implicit_curvature(*function(v)[1:])
-    return surfaces.Surface("ellipsoid", v, np.zeros((0, 3), np.int64), normals, k1, k2, d1,
-                            d2, np.full(len(v), np.inf))
-
-
 def decimated_mesh(shape, keep):
     """(vertices, faces, truth): the torus 2 / 0.5 (240 x 60) or the ellipsoid 2 / 1.5 / 1
     (icosphere of 40962 vertices) decimated by MeshLab's quadric edge collapse to ``keep`` of
@@ -896,7 +878,8 @@ def decimated_mesh(shape, keep):
     m = ms.current_mesh()
     v = np.asarray(m.vertex_matrix(), dtype=np.float64)
     f = np.asarray(m.face_matrix(), dtype=np.int64)
-    truth = surfaces.torus_at(v, 2.0, 0.5) if shape == "torus" else ellipsoid_at(v)
+    truth = surfaces.torus_at(v, 2.0, 0.5) if shape == "torus" else \
+        surfaces.ellipsoid_at(v)
     return v, f, truth
 
 

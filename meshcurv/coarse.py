@@ -53,7 +53,7 @@ from typing import Callable, NamedTuple
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .fit.mls import STEP, mls_curvature, mls_normals
+from .fit.mls import mls_curvature, mls_normals
 from .fit.outliers import outlier_weight
 from .neighbors import ball_counts, ball_grid, power_of_two_scale
 from .neighbors.csr import ball_max
@@ -203,7 +203,7 @@ def _supports(v, f, radius, use_kring, probed):
     with np.errstate(over="ignore"):
         vs = v * unit if unit != 1.0 else v
     h = support(vs, f, radius * unit)
-    reach = float(h.max()) * (1.0 + 2.0 * STEP)
+    reach = float(h.max())
     wide = reach * (PROBE_SCALE if probed else 1.0)
     finite = None if use_kring else np.flatnonzero(np.isfinite(vs).all(axis=1))
     search = kring_search(vs, f, reach) if use_kring else ball_search(vs, finite, wide)
@@ -362,7 +362,7 @@ def mls_rows(result, rows, v, normals, point_weights, h, search, unit=1.0, block
     ``normals`` (n, 3): unit normals of every vertex the supports reach (NaN: left out);
     ``point_weights`` (n,) or None: the outlier weights; ``h`` (m,): each row's support;
     ``search(idx)``: CSR lists ``(indptr, indices)`` about the vertices ``idx`` holding every
-    vertex within ``h (1 + 2 STEP)``; ``noise`` (n,): the noise the local jet measured at
+    vertex within ``h``; ``noise`` (n,): the noise the local jet measured at
     every vertex the supports reach (model units, NaN: unknown), None: the rows' own
     (``result.noise``) alone. Rows ``result`` has no estimate for, and rows whose MLS fit
     fails, keep the circle fits'.

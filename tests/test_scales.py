@@ -25,11 +25,10 @@ def test_a_list_of_radii_gives_each_radius_as_its_own_call(with_faces):
         np.testing.assert_array_equal(res.valid, one.valid)
         np.testing.assert_array_equal(res.status, one.status)
         # the same points within each ball; a cloud's lists come from another grid, which only
-        # changes the order of the sums (rounding, ~1e-12), which the MLS surface's central
-        # differences (this torus's regular sampling takes them) scale by 1 / STEP^2 = 1e8,
-        # relative to the largest curvature (2); there a principal direction's sign may flip
-        # where the frame's first axis is a principal direction
-        rtol, atol = (1e-9, 1e-11) if with_faces else (1e-7, 1e-7)
+        # changes the order of the sums (rounding, ~1e-14 of the largest curvature, 2, measured
+        # on the MLS surface this torus's regular sampling takes); there a principal
+        # direction's sign may flip where the frame's first axis is a principal direction
+        rtol, atol = 1e-9, 1e-11
         for name in ("k1", "k2", "normals", "noise"):
             np.testing.assert_allclose(getattr(res, name), getattr(one, name), rtol=rtol,
                                        atol=atol, err_msg=name)

@@ -5,21 +5,23 @@ kernel over query points with CSR neighbor lists (:func:`mls_curvature`).
 About each evaluation point y a sphere (or plane) ``u0 + u . z + u4 |z|^2`` is fitted to the
 neighbors' positions and unit normals with the weights ``(1 - |p - y|^2 / h^2)^4`` (h the
 support), in closed form; its value at y is the potential F(y), whose zero set is the surface.
-Its gradient and Hessian, by central differences over 13 evaluations at steps of
-``STEP * h`` about a point (the mixed second derivatives from the diagonal steps
-``+-(e_i + e_j)`` and the axis steps), give the normal and the shape operator
-``P Hess(F) P / |grad F|`` (P the tangent projector). Because the fit follows the evaluation
+Its gradient and Hessian at a point, exact (the fit's sums and the closed form carried as
+second-order jets in the evaluation point, one pass over the neighbors), give the normal and
+the shape operator ``P Hess(F) P / |grad F|`` (P the tangent projector). Because the fit follows the evaluation
 point, F is a smooth surface of second order even where a single sphere could not describe
 the shape (a torus's saddle) and where a neighborhood holds few points per direction (a
 low-poly torus: 16 vertices around the tube), where the circle fits in normal sections of
 :mod:`meshcurv.fit.fused` are far less accurate. It needs normals and is more sensitive to
 position noise than the circle fits; :mod:`meshcurv.coarse` says where it is used.
 
-:func:`mls_normals` gives the normal alone from the gradient's 6 evaluations (the MLS passes
-that only feed normals to the next one).
+:func:`mls_normals` gives the normal alone from first-order jets (the MLS passes that only
+feed normals to the next one).
 
 Numpy specification: :func:`meshcurv.fit.mls_spec.mls_curvature_at` and
-:func:`~meshcurv.fit.mls_spec.mls_normal_at`.
+:func:`~meshcurv.fit.mls_spec.mls_normal_at`, which take F's derivatives by central
+differences instead. The kernels took them so too until the jets replaced them (1.8x faster
+on a 300k torus's two passes; k moved by ~1e-8 of itself, the differences' truncation and
+rounding).
 """
 
 import math
@@ -29,15 +31,7 @@ from numba import njit, prange
 
 from ..linalg import CHUNK
 
-__all__ = ["mls_curvature", "mls_normals", "STEP"]
-
-# Central-difference step, a fraction of the support h: F is smooth on the scale h, so the
-# truncation error is ~STEP^2 relative, and its values near the surface are ~|grad F| times
-# the step, so the rounding error of the second differences is ~1e-16 / STEP^2 relative; 1e-4
-# balances the two at ~1e-8 (a coarse torus rotated or scaled by 1e-3 moves k by 4e-8 of
-# itself; 5e-7 with 1e-3, mostly the truncation's dependence on the axes).
-STEP = 1e-4
-
+__all__ = ["mls_curvature", "mls_normals"]
 
 @njit(cache=True)
 def _longest(indptr):
@@ -55,8 +49,8 @@ def _gather(points, normals, point_weights, nbr, lo, hi, own, x, reach2, pts, nr
     ``sqrt(reach2)`` of it, with a finite normal and a positive point weight: their offsets
     from x to ``pts``, normals to ``nrm`` and weights to ``pw`` (1 without
     ``point_weights``). Returns their count. The fits about x then work in these local
-    coordinates: a stencil step added to x itself would be rounded to x's precision (a scan
-    in UTM coordinates, x ~ 5e6: 1e-9, 4e-5 of a step of 1e-4 of a support of 0.25)."""
+    coordinates, which keep their precision far from the origin (a scan in UTM coordinates,
+    x ~ 5e6)."""
     k = 0
     for e in range(lo - 1, hi):
         if e < lo:
@@ -87,64 +81,179 @@ def _gather(points, normals, point_weights, nbr, lo, hi, own, x, reach2, pts, nr
     return k
 
 
+# The potential F and the weighted sums it is made of are handled as second-order jets in the
+# offset z of the evaluation point from x, at z = 0: 10-tuples of the value, the gradient (3)
+# and the Hessian's entries xx, xy, xz, yy, yz, zz (6); _HESSIAN[i, j] is the entry of (i, j).
+_ZERO = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+_UNDEFINED = (np.nan,) + _ZERO[1:]
+_HESSIAN = np.array([[4, 5, 6], [5, 7, 8], [6, 8, 9]])
+
+
 @njit(cache=True)
-def _potential(pts, nrm, pw, k, weighted, x0, x1, x2, h2):
-    """F at (x0, x1, x2): the oriented sphere fitted to the ``k`` points ``pts`` with normals
-    ``nrm`` (times the point weights ``pw`` where ``weighted``), NaN where the weights vanish
-    or the fit is singular."""
-    sw = sp0 = sp1 = sp2 = sn0 = sn1 = sn2 = sa = sb = 0.0
+def _jet_mul(a, b):
+    """The jet of the product of the functions whose jets are ``a`` and ``b``."""
+    return (a[0] * b[0],
+            a[0] * b[1] + b[0] * a[1], a[0] * b[2] + b[0] * a[2], a[0] * b[3] + b[0] * a[3],
+            a[0] * b[4] + b[0] * a[4] + 2.0 * a[1] * b[1],
+            a[0] * b[5] + b[0] * a[5] + a[1] * b[2] + a[2] * b[1],
+            a[0] * b[6] + b[0] * a[6] + a[1] * b[3] + a[3] * b[1],
+            a[0] * b[7] + b[0] * a[7] + 2.0 * a[2] * b[2],
+            a[0] * b[8] + b[0] * a[8] + a[2] * b[3] + a[3] * b[2],
+            a[0] * b[9] + b[0] * a[9] + 2.0 * a[3] * b[3])
+
+
+@njit(cache=True)
+def _jet_div(a, b):
+    """The jet of the quotient a / b (``b[0]`` nonzero)."""
+    c0 = a[0] / b[0]
+    c1 = (a[1] - c0 * b[1]) / b[0]
+    c2 = (a[2] - c0 * b[2]) / b[0]
+    c3 = (a[3] - c0 * b[3]) / b[0]
+    return (c0, c1, c2, c3,
+            (a[4] - c0 * b[4] - 2.0 * c1 * b[1]) / b[0],
+            (a[5] - c0 * b[5] - c1 * b[2] - c2 * b[1]) / b[0],
+            (a[6] - c0 * b[6] - c1 * b[3] - c3 * b[1]) / b[0],
+            (a[7] - c0 * b[7] - 2.0 * c2 * b[2]) / b[0],
+            (a[8] - c0 * b[8] - c2 * b[3] - c3 * b[2]) / b[0],
+            (a[9] - c0 * b[9] - 2.0 * c3 * b[3]) / b[0])
+
+
+@njit(cache=True)
+def _jet_axpy(s, a, b):
+    """The jet of s a + b (s a number)."""
+    return (s * a[0] + b[0], s * a[1] + b[1], s * a[2] + b[2], s * a[3] + b[3],
+            s * a[4] + b[4], s * a[5] + b[5], s * a[6] + b[6], s * a[7] + b[7],
+            s * a[8] + b[8], s * a[9] + b[9])
+
+
+@njit(cache=True)
+def _z_times(a, i):
+    """The jet of z_i times the function of jet ``a`` (z_i: the offset's coordinate i, 0 with
+    gradient e_i): value 0, gradient ``a[0] e_i``, Hessian ``e_i grad a^T + grad a e_i^T``."""
+    e0 = 1.0 if i == 0 else 0.0
+    e1 = 1.0 if i == 1 else 0.0
+    e2 = 1.0 if i == 2 else 0.0
+    return (0.0, a[0] * e0, a[0] * e1, a[0] * e2,
+            2.0 * e0 * a[1], e0 * a[2] + e1 * a[1], e0 * a[3] + e2 * a[1],
+            2.0 * e1 * a[2], e1 * a[3] + e2 * a[2], 2.0 * e2 * a[3])
+
+
+@njit(cache=True)
+def _row(sums, f):
+    """Row ``f`` of ``sums`` (:func:`_weighted_sums`) as a jet."""
+    return (sums[f, 0], sums[f, 1], sums[f, 2], sums[f, 3], sums[f, 4], sums[f, 5],
+            sums[f, 6], sums[f, 7], sums[f, 8], sums[f, 9])
+
+
+@njit(cache=True)
+def _weighted_sums(pts, nrm, pw, k, weighted, h2, second, sums, wj):
+    """``sums`` (9, 10) = the jets of the sums over the ``k`` points ``pts`` (offsets from x)
+    with normals ``nrm`` of w times 1, q (3), n (3), q . n and |q|^2 (its rows), where
+    ``w(z) = (1 - |q - z|^2 / h^2)^4`` (times the point weights ``pw`` where ``weighted``) is
+    each point's weight about the evaluation point x + z. Without ``second`` their Hessians
+    are 0. ``wj`` (10,) is scratch."""
+    for f in range(9):
+        for c in range(10):
+            sums[f, c] = 0.0
+        wj[f] = 0.0
+    wj[9] = 0.0
+    columns = 10 if second else 4
     for e in range(k):
-        q0 = pts[e, 0] - x0
-        q1 = pts[e, 1] - x1
-        q2 = pts[e, 2] - x2
+        q0 = pts[e, 0]
+        q1 = pts[e, 1]
+        q2 = pts[e, 2]
         qq = q0 * q0 + q1 * q1 + q2 * q2
         r = 1.0 - qq / h2
         if not r > 0.0:
             continue
+        c = pw[e] if weighted else 1.0
+        if not c > 0.0:
+            continue
+        # w = c r^4, r = 1 - |q - z|^2 / h^2: grad r = 2 q / h^2, Hess r = -2 I / h^2, so
+        # grad w = 4 c r^3 grad r and Hess w = 12 c r^2 grad r grad r^T + 4 c r^3 Hess r
+        rr = r * r
+        g = 8.0 * c * rr * r / h2
+        wj[0] = c * rr * rr
+        wj[1] = g * q0
+        wj[2] = g * q1
+        wj[3] = g * q2
+        if second:
+            hq = 48.0 * c * rr / (h2 * h2)
+            wj[4] = hq * q0 * q0 - g
+            wj[5] = hq * q0 * q1
+            wj[6] = hq * q0 * q2
+            wj[7] = hq * q1 * q1 - g
+            wj[8] = hq * q1 * q2
+            wj[9] = hq * q2 * q2 - g
         n0 = nrm[e, 0]
         n1 = nrm[e, 1]
         n2 = nrm[e, 2]
-        w = r * r
-        w = w * w
-        if weighted:
-            w *= pw[e]
-            if not w > 0.0:
-                continue
-        sw += w
-        sp0 += w * q0
-        sp1 += w * q1
-        sp2 += w * q2
-        sn0 += w * n0
-        sn1 += w * n1
-        sn2 += w * n2
-        sa += w * (q0 * n0 + q1 * n1 + q2 * n2)
-        sb += w * qq
-    pp = sp0 * sp0 + sp1 * sp1 + sp2 * sp2
-    den = sb * sw - pp
-    if not (sw > 0.0 and den > 0.0):
-        return np.nan
-    u4 = 0.5 * (sa * sw - (sp0 * sn0 + sp1 * sn1 + sp2 * sn2)) / den
-    u0 = (sn0 - 2.0 * u4 * sp0) / sw
-    u1 = (sn1 - 2.0 * u4 * sp1) / sw
-    u2 = (sn2 - 2.0 * u4 * sp2) / sw
-    return -(u0 * sp0 + u1 * sp1 + u2 * sp2 + u4 * sb) / sw
+        qn = q0 * n0 + q1 * n1 + q2 * n2
+        for cc in range(columns):
+            wc = wj[cc]
+            sums[0, cc] += wc
+            sums[1, cc] += wc * q0
+            sums[2, cc] += wc * q1
+            sums[3, cc] += wc * q2
+            sums[4, cc] += wc * n0
+            sums[5, cc] += wc * n1
+            sums[6, cc] += wc * n2
+            sums[7, cc] += wc * qn
+            sums[8, cc] += wc * qq
 
 
 @njit(cache=True)
-def _gradient(pts, nrm, pw, k, weighted, x, h, g, ends):
-    """``g[:]`` = grad F at x by central differences over the axis steps ``+-STEP h e_i``,
-    whose values are left in ``ends`` (2, 3) (ahead, behind) for the Hessian's diagonal; F of
-    :func:`_potential` over the ``k`` points of :func:`_gather`."""
-    h2 = h * h
-    s = STEP * h
-    x0, x1, x2 = x[0], x[1], x[2]
+def _potential_jet(sums):
+    """The jet of the MLS potential F at x (of ``F(x + z)`` at z = 0) from the jets of the
+    weighted sums (:func:`_weighted_sums`); NaN (value) where the fit is undefined at x.
+
+    About x + z the fit works on the offsets q - z, whose sums are W, P = S_q - z W, N,
+    A = S_qn - z . N and B = S_qq - 2 z . S_q + |z|^2 W (S the rows of ``sums``); then
+    u4 = (A W - P . N) / (2 (B W - |P|^2)), u = (N - 2 u4 P) / W and
+    F = u0 = -(u . P + u4 B) / W, as :func:`meshcurv.fit.mls_spec.potential` forms it."""
+    w = _row(sums, 0)
+    s = (_row(sums, 1), _row(sums, 2), _row(sums, 3))
+    n = (_row(sums, 4), _row(sums, 5), _row(sums, 6))
+    p = (_jet_axpy(-1.0, _z_times(w, 0), s[0]), _jet_axpy(-1.0, _z_times(w, 1), s[1]),
+         _jet_axpy(-1.0, _z_times(w, 2), s[2]))
+    a = _row(sums, 7)
+    b = _row(sums, 8)
     for i in range(3):
-        e0 = s if i == 0 else 0.0
-        e1 = s if i == 1 else 0.0
-        e2 = s if i == 2 else 0.0
-        ends[0, i] = _potential(pts, nrm, pw, k, weighted, x0 + e0, x1 + e1, x2 + e2, h2)
-        ends[1, i] = _potential(pts, nrm, pw, k, weighted, x0 - e0, x1 - e1, x2 - e2, h2)
-        g[i] = (ends[0, i] - ends[1, i]) / (2.0 * s)
+        a = _jet_axpy(-1.0, _z_times(n[i], i), a)
+        b = _jet_axpy(-2.0, _z_times(s[i], i), b)
+    # |z|^2 W: value and gradient 0, Hessian 2 W I
+    b = (b[0], b[1], b[2], b[3], b[4] + 2.0 * w[0], b[5], b[6], b[7] + 2.0 * w[0], b[8],
+         b[9] + 2.0 * w[0])
+    pp = _jet_mul(p[0], p[0])
+    pn = _jet_mul(p[0], n[0])
+    for i in range(1, 3):
+        pp = _jet_axpy(1.0, _jet_mul(p[i], p[i]), pp)
+        pn = _jet_axpy(1.0, _jet_mul(p[i], n[i]), pn)
+    den = _jet_axpy(-1.0, pp, _jet_mul(b, w))
+    if not (w[0] > 0.0 and den[0] > 0.0):
+        return _UNDEFINED
+    u4 = _jet_div(_jet_axpy(-1.0, pn, _jet_mul(a, w)), _jet_axpy(2.0, den, _ZERO))
+    # u . P = (N . P - 2 u4 |P|^2) / W
+    up = _jet_div(_jet_axpy(-2.0, _jet_mul(u4, pp), pn), w)
+    return _jet_axpy(-1.0, _jet_div(_jet_axpy(1.0, up, _jet_mul(u4, b)), w), _ZERO)
+
+
+@njit(cache=True)
+def _derivatives(pts, nrm, pw, k, weighted, h, second, sums, wj, g, hess):
+    """``g[:]`` = grad F and, with ``second``, ``hess[:, :]`` = Hess F at x (exact, from the
+    jets of :func:`_potential_jet`) over the ``k`` points of :func:`_gather`; False where F
+    is undefined at x."""
+    _weighted_sums(pts, nrm, pw, k, weighted, h * h, second, sums, wj)
+    f = _potential_jet(sums)
+    if not np.isfinite(f[0]):
+        return False
+    for i in range(3):
+        g[i] = f[1 + i]
+    if second:
+        for i in range(3):
+            for j in range(3):
+                hess[i, j] = f[_HESSIAN[i, j]]
+    return True
 
 
 @njit(cache=True)
@@ -162,29 +271,13 @@ def _unit_normal(g, nq, out):
 
 
 @njit(cache=True)
-def _curvature_one(pts, nrm, pw, k, weighted, x, nq, h, hess, g, ends, out):
+def _curvature_one(pts, nrm, pw, k, weighted, nq, h, sums, wj, hess, g, out):
     """``out[:]`` = (k1, k2, d1 (3), d2 (3), n (3)) at x from the ``k`` points of
     :func:`_gather` (see :func:`mls_curvature`); False (``out`` untouched) where F or its
-    derivatives are undefined. ``hess`` (3, 3), ``g`` (3,) and ``ends`` (2, 3) are
-    scratch."""
-    h2 = h * h
-    s = STEP * h
-    x0, x1, x2 = x[0], x[1], x[2]
-    _gradient(pts, nrm, pw, k, weighted, x, h, g, ends)
-    f0 = _potential(pts, nrm, pw, k, weighted, x0, x1, x2, h2)
-    for i in range(3):
-        hess[i, i] = (ends[0, i] - 2.0 * f0 + ends[1, i]) / (s * s)
-    for i in range(3):
-        for j in range(i + 1, 3):
-            # F at x +- (s e_i + s e_j) against the axis steps' (never the same axis: j > i)
-            y0 = s if i == 0 else 0.0
-            y1 = s if (i == 1 or j == 1) else 0.0
-            y2 = s if j == 2 else 0.0
-            both = (_potential(pts, nrm, pw, k, weighted, x0 + y0, x1 + y1, x2 + y2, h2)
-                    + _potential(pts, nrm, pw, k, weighted, x0 - y0, x1 - y1, x2 - y2, h2))
-            hess[i, j] = (both - ends[0, i] - ends[1, i] - ends[0, j] - ends[1, j]
-                          + 2.0 * f0) / (2.0 * s * s)
-            hess[j, i] = hess[i, j]
+    derivatives are undefined. ``sums``, ``wj`` (:func:`_weighted_sums`), ``hess`` (3, 3) and
+    ``g`` (3,) are scratch."""
+    if not _derivatives(pts, nrm, pw, k, weighted, h, True, sums, wj, g, hess):
+        return False
     if not np.isfinite(hess.sum()):
         return False
     scale = _unit_normal(g, nq, out)
@@ -242,13 +335,13 @@ def mls_curvature(points, normals, query_points, query_normals, query_rows, indp
     query_rows : (m,) int64, the row of each query point in ``points`` (-1: none): it takes
         part in its own fit once, whether or not its list holds it
     indptr, indices : CSR lists into ``points``: the candidates of query q; they must hold
-        every point within ``support[q] * (1 + 2 STEP)`` of it (the stencil's reach)
+        every point within ``support[q]`` of it
     support : (m,) float64, the weights' support h per query point, model units
     point_weights : (n,) float64 in [0, 1] or None, multiplies each point's weight
     out : ``(k1, k2, d1, d2, n)``, (m,) and (m, 3) float64, written in place: curvatures
         (1 / model units, k1 >= k2, convex positive about the normal), unit principal
         directions and the unit normal of the MLS surface (d1, d2, n right-handed); NaN
-        where the fit is undefined at a stencil point (too few points within h)
+        where the fit is undefined (too few points within h)
     """
     _mls_kernel(points, normals, query_points, query_normals, query_rows, indptr, indices,
                 support, point_weights, False, out[0], out[1], out[2], out[3], out[4])
@@ -258,9 +351,8 @@ def mls_curvature(points, normals, query_points, query_normals, query_rows, indp
 def mls_normals(points, normals, query_points, query_normals, query_rows, indptr, indices,
                 support, point_weights, out):
     """The MLS surface's unit normal at each query point: ``n`` of :func:`mls_curvature`
-    from the gradient's 6 evaluations alone (the same bits wherever that kernel gives one),
-    written to ``out`` (m, 3); NaN where F is undefined at an axis step or its gradient
-    vanishes. Arguments as :func:`mls_curvature`."""
+    from first-order jets alone (the same bits wherever that kernel gives one), written to
+    ``out`` (m, 3); NaN where F is undefined or its gradient vanishes. Arguments as :func:`mls_curvature`."""
     none, none3 = np.empty(0), np.empty((0, 3))
     _mls_kernel(points, normals, query_points, query_normals, query_rows, indptr, indices,
                 support, point_weights, True, none, none, none3, none3, out)
@@ -278,12 +370,12 @@ def _mls_kernel(points, normals, query_points, query_normals, query_rows, indptr
     for c in prange(nchunks):
         hess = np.empty((3, 3))
         g = np.empty(3)
-        ends = np.empty((2, 3))
+        sums = np.empty((9, 10))
+        wj = np.empty(10)
         row = np.empty(11)
         x = np.empty(3)
-        origin = np.zeros(3)       # x in the gathered points' local coordinates
         nq = np.empty(3)
-        # the points of one query's fits, gathered once for its 13 (6) evaluations
+        # the points of one query's fit, gathered once
         pts = np.empty((most + 1, 3))
         nrm = np.empty((most + 1, 3))
         pw = np.empty(most + 1)
@@ -294,16 +386,14 @@ def _mls_kernel(points, normals, query_points, query_normals, query_rows, indptr
             h = support[q]
             ok = np.isfinite(x[0] + x[1] + x[2]) and h > 0.0
             if ok:
-                # every stencil point lies within sqrt 2 STEP h of x
-                reach = h * (1.0 + 4.0 * STEP)
                 k = _gather(points, normals, point_weights, indices, indptr[q], indptr[q + 1],
-                            query_rows[q], x, reach * reach, pts, nrm, pw)
+                            query_rows[q], x, h * h, pts, nrm, pw)
                 if gradient_only:
-                    _gradient(pts, nrm, pw, k, weighted, origin, h, g, ends)
-                    ok = _unit_normal(g, nq, row) != 0.0
+                    ok = (_derivatives(pts, nrm, pw, k, weighted, h, False, sums, wj, g, hess)
+                          and _unit_normal(g, nq, row) != 0.0)
                 else:
-                    ok = _curvature_one(pts, nrm, pw, k, weighted, origin, nq, h, hess, g,
-                                        ends, row)
+                    ok = _curvature_one(pts, nrm, pw, k, weighted, nq, h, sums, wj, hess, g,
+                                        row)
             for a in range(3):
                 nout[q, a] = row[8 + a] if ok else np.nan
             if gradient_only:

@@ -4,9 +4,15 @@ oriented algebraic sphere fitted about a point, and the curvature of its zero se
 import numpy as np
 
 from ..surfaces import implicit_curvature
-from .mls import STEP
 
-__all__ = ["potential", "mls_curvature_at", "mls_normal_at"]
+__all__ = ["potential", "mls_curvature_at", "mls_normal_at", "STEP"]
+
+# Central-difference step, a fraction of the support h: F is smooth on the scale h, so the
+# truncation error is ~STEP^2 relative, and its values near the surface are ~|grad F| times
+# the step, so the rounding error of the second differences is ~1e-16 / STEP^2 relative; 1e-4
+# balances the two at ~1e-8. The kernels' derivatives are exact (second-order jets): this
+# specification checks them by another route.
+STEP = 1e-4
 
 
 def potential(x, points, normals, support, point_weights=None):

@@ -61,6 +61,31 @@ def test_point_residuals_match_the_numpy_specification():
     assert orders >= {0, 3, 6, 10}
 
 
+def test_a_fit_that_leaves_out_much_of_the_neighborhood_judges_nothing():
+    # trimesh's 32 x 12 torus 1 / 0.3 at radius 0.34: a top-ring vertex's 10 neighbors are its
+    # two ring neighbors (as high as itself) and 6 below, 2 further down. The robust plane fit
+    # kept the 6 (residual 0), left out 4 and read the vertex 0.12 radii off at a scale of
+    # 0.001 (score 6.7): its whole ring flagged as spikes. A fit leaving out more than
+    # OUTLIER_MAX_REJECTED of the neighbors gives no score (weight 1, not flagged)
+    import trimesh
+
+    t = trimesh.creation.torus(1.0, 0.3, major_sections=32, minor_sections=12)
+    v = np.asarray(t.vertices)
+    top = np.flatnonzero(np.isclose(v[:, 2], 0.3))
+    radius = 0.3379
+    indptr, indices = ball_csr(v, radius)
+    residual, scale, dof = (np.empty(len(v)) for _ in range(3))
+    outliers.point_residuals(v, v, indptr, indices, radius, residual, scale, dof)
+    assert len(top) == 32 and np.isnan(residual[top]).all() and (dof[top] == 0).all()
+    ref = outliers_spec.point_residual(v[top[0]], v[indices[indptr[top[0]]:indptr[top[0] + 1]]],
+                                       radius)
+    assert np.isnan(ref[0]) and ref[2] == 0
+    # the rows of the tube's sides are judged (fits of all their neighbors), none an outlier
+    score = outliers.outlier_score(residual, scale, dof)
+    side = np.isfinite(score)
+    assert side.sum() >= len(v) - 2 * len(top) and (score[side] < OUTLIER_TRUSTED).all()
+
+
 def test_clean_neighborhoods_stop_after_the_least_squares_start():
     """On a clean torus (~46 points per ball, cubic fits) no residual reaches TUKEY_C scales
     (the scale is floored above them), so the reweighting rounds are skipped: the same bits as

@@ -15,7 +15,8 @@ from numba import njit, prange
 
 from ..linalg import (CHUNK, ball_offset, normal_frame, select_median,
                       smallest_eigvec_jacobi3, solve_sym)
-from .constants import OUTLIER_ITERATIONS, OUTLIER_SCALE_FLOOR, OUTLIER_TRUSTED, TUKEY_C
+from .constants import (OUTLIER_ITERATIONS, OUTLIER_MAX_REJECTED, OUTLIER_SCALE_FLOOR,
+                        OUTLIER_TRUSTED, TUKEY_C)
 from .jet import _add_monomials
 
 __all__ = ["point_residuals", "outlier_score", "outlier_weight", "model_terms", "MAD_SIGMA",
@@ -337,8 +338,9 @@ def point_residuals(points, query_points, indptr, indices, radius, residual, sca
         fitted coefficients (0 where no fit)
     iterations : int, most reweighting rounds
 
-    Both are NaN where the fit is singular (fewer than 6 well-spread neighbors) or x is not
-    finite.
+    Both are NaN where the fit is singular (fewer than 6 well-spread neighbors), where its
+    robust weights left out more than ``OUTLIER_MAX_REJECTED`` of the neighbors (it
+    describes part of them only), or x is not finite.
     """
     m = query_points.shape[0]
     r2max = radius * radius
@@ -423,6 +425,13 @@ def point_residuals(points, query_points, indptr, indices, radius, residual, sca
                     z = res[i] / (TUKEY_C * s)
                     wr[i] = (1.0 - z * z) ** 2 if z < 1.0 else 0.0
             if not ok:
+                continue
+            # a fit that left out more than OUTLIER_MAX_REJECTED of the neighbors describes
+            # part of them only: no judgement of x (a ridge of a coarse grid, not a spike)
+            rejected = 0
+            for i in range(k):
+                rejected += wr[i] == 0.0
+            if rejected > OUTLIER_MAX_REJECTED * k:
                 continue
             # the scale of the final fit's residuals: the biweight midvariance (Mosteller &
             # Tukey), as robust as the MAD and 87 % efficient at the Gaussian instead of 37 %

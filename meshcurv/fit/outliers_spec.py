@@ -3,7 +3,7 @@ of one point from a robust (Tukey-reweighted) height fit of its neighbors, and i
 
 import numpy as np
 
-from .constants import OUTLIER_ITERATIONS, OUTLIER_SCALE_FLOOR, TUKEY_C
+from .constants import OUTLIER_ITERATIONS, OUTLIER_MAX_REJECTED, OUTLIER_SCALE_FLOOR, TUKEY_C
 
 __all__ = ["point_residual"]
 
@@ -27,7 +27,8 @@ def point_residual(x, neighbors, radius, iterations=OUTLIER_ITERATIONS):
         residuals, the reweighting itself by their MAD; corrected
         for its p coefficients, floored, times ``sqrt(1 + c)`` with c the fitted height's
         variance at x per unit noise), model units; both NaN with fewer than 6 neighbors or
-        a singular fit
+        a singular fit, or a fit whose robust weights left out more than
+        ``OUTLIER_MAX_REJECTED`` of the neighbors
     dof : int, k - p, the neighbors less the fitted coefficients (0 where no fit)
     """
     x = np.asarray(x, dtype=np.float64)
@@ -65,6 +66,8 @@ def point_residual(x, neighbors, radius, iterations=OUTLIER_ITERATIONS):
             break                   # no neighbor to down-weight
         z = res / (TUKEY_C * s)
         wr = np.where(z < 1.0, (1.0 - z * z) ** 2, 0.0)
+    if np.count_nonzero(wr == 0.0) > OUTLIER_MAX_REJECTED * k:
+        return np.nan, np.nan, 0
     # biweight midvariance of the final residuals
     u = res / (9.0 * np.median(res))
     inner = u < 1.0

@@ -310,9 +310,13 @@ def _estimate(v, f, given_normals, radius, query, plan, progress):
             # the probe judges the default radius's fits: "auto" blends where the default does
             def default_radius(rows):
                 return _run_radii(v, f, given_normals, [r0], rows, plan, progress)
-            return coarse_mls.estimate(v, f, [r0], query, per_vertex_scale, plan.use_kring,
-                                       coarse, probe_fits=default_radius)[0]
-        return per_vertex_scale(query)[0]
+            res = coarse_mls.estimate(v, f, [r0], query, per_vertex_scale, plan.use_kring,
+                                      coarse, probe_fits=default_radius)[0]
+        else:
+            res = per_vertex_scale(query)[0]
+        # rows whose balls reached around the surface at every scale of the ladder: as the
+        # default radius's
+        return _smaller_balls(res, v, f, given_normals, query, plan, progress)
     radius, coarse = _resolve_radius(radius, v, f, details=True)
     res = _at_radius(v, f, given_normals, radius, query, plan, progress, coarse)
     return _smaller_balls(res, v, f, given_normals, query, plan, progress)

@@ -150,7 +150,7 @@ def test_smaller_balls_serve_what_wraps_around():
     alone 0.0038 (0.0009 on the large one, whose given normals are those of its 320-face
     subdivision). Without faces or normals the plane fits over balls 2.2-4 times a part's
     width pass the shape test, so the rows keep WRAPS_AROUND rather than risk a wrong
-    estimate."""
+    estimate. ``radius="auto"`` does the same."""
     import trimesh
     big, small = trimesh.creation.icosphere(4, radius=1.0), trimesh.creation.icosphere(4, 0.05)
     v = np.vstack([big.vertices, small.vertices + [3.0, 0.0, 0.0]])
@@ -165,6 +165,13 @@ def test_smaller_balls_serve_what_wraps_around():
         assert dk[on_small].max() < 0.01 and dk[~on_small].max() < 0.003
         assert np.all(res.radius_used[~on_small] == res.radius)
         assert np.allclose(res.radius_used[on_small], res.radius / 8)
+    # the per-vertex scale's ladder starts at the default radius: the small sphere's rows
+    # wrapped at every scale and were left WRAPS_AROUND; now as the default radius's
+    auto = meshcurv.principal_curvatures(v, f, radius="auto")
+    assert auto.valid.all()
+    dk = np.maximum(np.abs(auto.k1 - k), np.abs(auto.k2 - k))
+    assert dk[on_small].max() < 0.01
+    assert np.allclose(auto.radius_used[on_small], auto.radius / 8)
     plain = meshcurv.principal_curvatures(v, f, sparse_retry=False)
     assert np.all(plain.status[on_small] == Status.WRAPS_AROUND)
     assert plain.valid[~on_small].all()

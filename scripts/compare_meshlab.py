@@ -810,7 +810,8 @@ def group_icosahedra(methods, size, switches, timeout, **_):
 
 
 # Coarse tori of trimesh.creation.torus: (major radius, minor radius, major x minor sections).
-COARSE_TORI = ((2.0, 0.5, 32, 32), (1.0, 0.2, 32, 32), (1.0, 0.3, 64, 16), (3.0, 1.0, 40, 20))
+COARSE_TORI = ((2.0, 0.5, 32, 32), (1.0, 0.2, 32, 32), (1.0, 0.3, 64, 16), (3.0, 1.0, 40, 20),
+               (1.0, 0.3, 32, 12))
 
 
 def group_coarse(methods, size, switches, timeout, **_):

@@ -7,12 +7,13 @@ neighbors' positions and unit normals with the weights ``(1 - |p - y|^2 / h^2)^4
 support), in closed form; its value at y is the potential F(y), whose zero set is the surface.
 Its gradient and Hessian at a point, exact (the fit's sums and the closed form carried as
 second-order jets in the evaluation point, one pass over the neighbors), give the normal and
-the shape operator ``P Hess(F) P / |grad F|`` (P the tangent projector). Because the fit follows the evaluation
-point, F is a smooth surface of second order even where a single sphere could not describe
-the shape (a torus's saddle) and where a neighborhood holds few points per direction (a
-low-poly torus: 16 vertices around the tube), where the circle fits in normal sections of
-:mod:`meshcurv.fit.fused` are far less accurate. It needs normals and is more sensitive to
-position noise than the circle fits; :mod:`meshcurv.coarse` says where it is used.
+the shape operator ``P Hess(F) P / |grad F|`` (P the tangent projector). Because the fit
+follows the evaluation point, F is a smooth surface of second order even where a single
+sphere could not describe the shape (a torus's saddle) and where a neighborhood holds few
+points per direction (a low-poly torus: 16 vertices around the tube), where the circle fits
+in normal sections of :mod:`meshcurv.fit.fused` are far less accurate. It needs normals and
+is more sensitive to position noise than the circle fits; :mod:`meshcurv.coarse` says where
+it is used.
 
 :func:`mls_normals` gives the normal alone from first-order jets (the MLS passes that only
 feed normals to the next one).
@@ -32,6 +33,7 @@ from numba import njit, prange
 from ..linalg import CHUNK
 
 __all__ = ["mls_curvature", "mls_normals"]
+
 
 @njit(cache=True)
 def _longest(indptr):
@@ -152,11 +154,8 @@ def _weighted_sums(pts, nrm, pw, k, weighted, h2, second, sums, wj):
     ``w(z) = (1 - |q - z|^2 / h^2)^4`` (times the point weights ``pw`` where ``weighted``) is
     each point's weight about the evaluation point x + z. Without ``second`` their Hessians
     are 0. ``wj`` (10,) is scratch."""
-    for f in range(9):
-        for c in range(10):
-            sums[f, c] = 0.0
-        wj[f] = 0.0
-    wj[9] = 0.0
+    sums[:, :] = 0.0
+    wj[:] = 0.0
     columns = 10 if second else 4
     for e in range(k):
         q0 = pts[e, 0]
@@ -352,7 +351,8 @@ def mls_normals(points, normals, query_points, query_normals, query_rows, indptr
                 support, point_weights, out):
     """The MLS surface's unit normal at each query point: ``n`` of :func:`mls_curvature`
     from first-order jets alone (the same bits wherever that kernel gives one), written to
-    ``out`` (m, 3); NaN where F is undefined or its gradient vanishes. Arguments as :func:`mls_curvature`."""
+    ``out`` (m, 3); NaN where F is undefined or its gradient vanishes. Arguments as
+    :func:`mls_curvature`."""
     none, none3 = np.empty(0), np.empty((0, 3))
     _mls_kernel(points, normals, query_points, query_normals, query_rows, indptr, indices,
                 support, point_weights, True, none, none, none3, none3, out)

@@ -264,19 +264,34 @@ def test_probed_queries_give_the_rows_of_the_whole_input(faces, radius):
         assert np.allclose(getattr(part, name), getattr(whole, name)[q], rtol=0, atol=1e-12)
 
 
-@pytest.mark.parametrize("torus", [(1.0, 0.3, 64, 16), (1.0, 0.3, 96, 24)])
-def test_radius_auto_blends_where_the_default_does(torus):
-    # the probe judges the default radius's circle fits for "auto" too, so a coarse torus
-    # (64 x 16) and one whose circle fits are limited by the sampling (96 x 24) get the MLS
-    # surface: measured 0.0042 / 0.0029 (the default 0.0058 / 0.0038; "auto" with the
-    # circle fits alone 0.030 / 0.016); its own fits are nearer the MLS surface's, and the
-    # 96 x 24 torus's probe would keep them (ratio 2.42)
-    v, f, truth = _coarse_torus(*torus)
+def test_radius_auto_blends_where_the_default_does():
+    # the probe judges the default radius's circle fits for "auto" too, so a torus whose
+    # circle fits are limited by the sampling (96 x 24) gets the MLS surface: measured 0.0029
+    # (the default 0.0038; "auto" with the circle fits alone 0.016); its own fits are nearer
+    # the MLS surface's, and the torus's probe would keep them (ratio 2.42)
+    v, f, truth = _coarse_torus(1.0, 0.3, 96, 24)
     auto = _mean_dk(meshcurv.principal_curvatures(v, f, radius="auto"), truth)
     default = _mean_dk(meshcurv.principal_curvatures(v, f), truth)
     alone = _mean_dk(meshcurv.principal_curvatures(v, f, radius="auto", coarse_fit="circles"),
                      truth)
     assert auto <= default and auto < 0.35 * alone
+
+
+@pytest.mark.parametrize("faces", [True, False])
+def test_radius_auto_keeps_the_default_radius_on_inputs_coarse_for_their_shape(faces):
+    # the default radius was made smaller so that its balls stay on a local patch; the
+    # per-vertex scale around it lost to it on half of the coarse tori (measured before:
+    # trimesh's 1 / 0.2, 32 x 32, as a cloud 0.018 -> 0.38, 2 / 0.5 as a cloud 0.0041 ->
+    # 0.016, 1 / 0.3, 48 x 16 as a cloud 0.015 -> 0.066, 1 / 0.3, 24 x 8 mesh 0.085 -> 0.15;
+    # it won on 1 / 0.3, 64 x 16, 0.0058 -> 0.0042, and 32 x 12 as a cloud, 0.52 -> 0.18)
+    v, f, truth = _coarse_torus(1.0, 0.2, 32, 32)
+    f = f if faces else None
+    assert default_radius(v, faces=f, details=True)[1]
+    auto = meshcurv.principal_curvatures(v, f, radius="auto")
+    default = meshcurv.principal_curvatures(v, f)
+    assert _same_bits(auto, default)
+    assert np.array_equal(auto.radius_used, default.radius_used) and auto.radius == default.radius
+    assert _mean_dk(auto, truth) < 0.025
 
 
 def test_the_result_says_how_much_of_each_row_is_the_mls_surfaces():

@@ -50,6 +50,7 @@ def _cases():
     para = surfaces.paraboloid(sampling="random", n=4000, extent=4.0, seed=2)
     cloud = _noisy(sphere.vertices, 0.003, seed=3)
     coarse = trimesh.creation.torus(1.0, 0.3, major_sections=64, minor_sections=16)
+    fine = trimesh.creation.torus(1.0, 0.3, major_sections=96, minor_sections=24)
     pc = meshcurv.principal_curvatures
     return {
         # the circle fits alone (coarse_fit="circles"), and blended with the MLS surface where
@@ -76,8 +77,9 @@ def _cases():
         # coarse for its shape at the default radius: circle fits blended with MLS curvature
         "coarse_torus_mls": lambda: pc(coarse.vertices, coarse.faces),
         "coarse_torus_cloud_mls": lambda: pc(coarse.vertices),
-        # per-vertex scale, blended where the default radius's fits are
-        "coarse_torus_auto_mls": lambda: pc(coarse.vertices, coarse.faces, radius="auto"),
+        # per-vertex scale, blended where the default radius's fits are (a torus whose circle
+        # fits the probe finds limited by its sampling; coarse inputs keep the default radius)
+        "torus_96x24_auto_mls": lambda: pc(fine.vertices, fine.faces, radius="auto"),
     }
 
 

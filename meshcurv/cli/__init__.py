@@ -41,8 +41,8 @@ estimates at every radius in one pass and names each radius's fields with a suff
 k1_r1, k1_r2 ("." written "p", "-" "m", "%" "pct": k1_r2pct), so that the names stay
 identifiers in PDAL, laspy and Python; normals, quality and colour are the first radius's.
 --radius auto: each vertex takes the radius (0.7 to 2.8 times the default) that minimises its
-estimated error (noise and bias); clean data keep the default radius; the field radius_used
-(model units) says which.
+estimated error (noise and bias); clean data and inputs coarse for their shape keep the
+default radius; the field radius_used (model units) says which.
 Vertices are never reordered, merged or dropped (STL corners are merged by position on reading);
 vertices without an estimate have NaN curvature, valid = 0, quality 0 and a grey colour.
 

@@ -265,7 +265,8 @@ def test_a_torus_whose_balls_first_thicken_as_they_shrink_gets_a_local_patch(rad
     # holds a section of the tube, 0.79, and the one-step rule kept 0.96: every row
     # WRAPS_AROUND, re-estimated at half the radius 0.315 off by the default and left invalid
     # by "auto". Two steps take the flatness to 0.30 (0.12 at the third). Measured now: radius
-    # 0.34, every row valid, mean |dk| 0.195 (default) and 0.183 ("auto"), k1 = 3.3
+    # 0.34, every row valid, mean |dk| 0.195 (0.183 with "auto" before it kept the default
+    # radius on coarse inputs), k1 = 3.3
     t = trimesh.creation.torus(1.0, 0.3, major_sections=32, minor_sections=12)
     v = np.asarray(t.vertices)
     truth = surfaces.torus_at(v, 1.0, 0.3)

@@ -12,8 +12,8 @@ import numpy as np
 from scipy.spatial import Delaunay
 
 __all__ = ["Surface", "paraboloid", "monkey_saddle", "egg_crate", "bump", "saddle",
-           "scan_terrain", "sphere", "ellipsoid", "ellipsoid_at", "cylinder", "torus", "torus_at",
-           "goursat_function", "goursat_at", "implicit_curvature", "project_to_implicit",
+           "scan_terrain", "sphere", "ellipsoid", "ellipsoid_at", "cylinder", "torus",
+           "torus_at", "goursat_function", "goursat_at", "implicit_curvature", "project_to_implicit",
            "add_normal_noise", "orient_faces"]
 
 
@@ -267,9 +267,7 @@ def ellipsoid(semi_axes=(2.0, 1.5, 1.0), subdivisions=5, sampling="regular", n=1
     axes = np.asarray(semi_axes, dtype=np.float64)
     unit = sphere(1.0, subdivisions, sampling, n, seed)
     v = unit.vertices * axes
-    normals, k1, k2, d1, d2 = implicit_curvature(2 * v / axes ** 2,
-                                                 np.broadcast_to(np.diag(2 / axes ** 2),
-                                                                 (len(v), 3, 3)))
+    normals, k1, k2, d1, d2 = implicit_curvature(*_ellipsoid_function(v, axes)[1:])
     return Surface("ellipsoid", v, orient_faces(v, unit.faces, normals), normals, k1, k2, d1,
                    d2, np.full(len(v), np.inf))
 
@@ -286,15 +284,18 @@ def ellipsoid_at(points, semi_axes=(2.0, 1.5, 1.0)):
     ([2.0, 0.0, 0.0], 2.0, 0.888888888889)
     """
     axes = np.asarray(semi_axes, dtype=np.float64)
-
-    def function(x):
-        hess = np.broadcast_to(np.diag(2 / axes ** 2), (len(x), 3, 3))
-        return np.sum(x * x / axes ** 2, axis=1) - 1.0, 2 * x / axes ** 2, hess
-
-    v = project_to_implicit(points, function)
-    normals, k1, k2, d1, d2 = implicit_curvature(*function(v)[1:])
+    v = project_to_implicit(points, lambda x: _ellipsoid_function(x, axes))
+    normals, k1, k2, d1, d2 = implicit_curvature(*_ellipsoid_function(v, axes)[1:])
     return Surface("ellipsoid", v, np.zeros((0, 3), np.int64), normals, k1, k2, d1, d2,
                    np.full(len(v), np.inf))
+
+
+def _ellipsoid_function(x, axes):
+    """The implicit function x^2/a^2 + y^2/b^2 + z^2/c^2 - 1 of the ellipsoid of semi-axes
+    ``axes`` at the points ``x`` (n, 3): its values (n,), gradients (n, 3), Hessians (n, 3,
+    3)."""
+    hess = np.broadcast_to(np.diag(2 / axes ** 2), (len(x), 3, 3))
+    return np.sum(x * x / axes ** 2, axis=1) - 1.0, 2 * x / axes ** 2, hess
 
 
 def cylinder(radius=1.0, height=4.0, n_around=200, n_along=None):

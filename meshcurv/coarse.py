@@ -34,6 +34,27 @@ With NOISE_SCALE 0.02 (one pass) the clean and 0.05 % rows gained a little more 
 against 0.0074 on the first torus) and the 0.3 % row lost more (0.072 on the first torus,
 14 % worse than the circle fits alone); 0.015 keeps every loss within 5 %.
 
+The jet's residual also holds what a quadric leaves of the shape within the ball: on
+trimesh's 32 x 12 tori 1 / 0.3 and 3 / 1 (balls of ~10 vertices) 0.067 and 0.055 of the
+radius (median), which kept the MLS surface out (mean |dk| 0.195 and 0.053, the circle fits'). On meshes a row's own
+noise is the smaller of the jet's and the noise measured over the mesh's rings
+(:mod:`meshcurv.ring_noise`, within a few percent of the noise added, 0.0016 of the radius
+there clean), and the rough points of a row's support (:data:`ROUGH_NOISE`) count where the
+support reaches a crease (:data:`CREASE`). Mean |dk|, the jet's noise -> the smaller, and
+the change on the four tori above (in that order) and on trimesh's 5 % decimation of a
+240 x 60 torus 2 / 0.5 (measured once with a script; the circle fits alone on the 32 x 12
+tori: 0.054 and 0.195 clean):
+
+======  ===============  ===============  ======================  ===============
+noise   32 x 12 3 / 1    32 x 12 1 / 0.3  the four above          5 % decimation
+======  ===============  ===============  ======================  ===============
+0       0.053 -> 0.0065  0.195 -> 0.012   -7, 0, +2, +11 %        0.021 -> 0.022
+0.05 %  0.055 -> 0.010   0.194 -> 0.030   +5, +2, +3, +11 %       0.027 -> 0.025
+0.1 %   0.058 -> 0.018   0.196 -> 0.066   -4, +10, -6, -13 %      0.040 -> 0.036
+0.2 %   0.064 -> 0.064   0.193 -> 0.188   +1, +2, 0, 0 %          0.057 -> 0.057
+0.3 %   0.069 -> 0.069   0.207 -> 0.207   0 %                     0.063 -> 0.063
+======  ===============  ===============  ======================  ===============
+
 The same tori as clouds of their vertices (the circle fits with the cloud's own normals):
 0.054, 0.019, 0.028, 0.068 alone, 0.013, 0.0025, 0.0041, 0.018 blended; with 0.1 % noise
 0.076, 0.019, 0.031, 0.081 -> 0.041, 0.013, 0.025, 0.060, with 0.3 % 0.0630, 0.026, 0.047,
@@ -60,6 +81,7 @@ from .neighbors.csr import ball_max
 from .neighbors.radius import _longest_edges
 from .pipeline import (BLOCK, _sample_queries, _search_like, ball_search, clean_fraction,
                        kring_search)
+from .ring_noise import ring_noise
 from .weld import expand_rows
 
 __all__ = ["estimate", "sampling_limited", "support", "mls_rows", "support_noise",
@@ -96,9 +118,20 @@ NOISE_SCALE = 0.015
 # vertices, whose MLS estimate is as good as the others'); at a sharp edge it is 0.03-0.05 of
 # the radius. A ball wider than a tube reads as rough too: trimesh's 32 x 32 torus 2 / 0.5
 # with its exact normals given (0.039 of the radius on two rings) lost the blend, mean |dk|
-# 0.0070 -> 0.024.
+# 0.0070 -> 0.024. On meshes the rough points count for a row whose support reaches a crease
+# (:data:`CREASE`): the 32 x 12 tori's jets read 0.055-0.067 of the radius.
 ROUGH_NOISE = 2.0
 
+
+# The rings' noise (:mod:`meshcurv.ring_noise`) over the mean edge length from which a vertex
+# lies on a crease. Measured: 0.13-0.17 on the edges of cubes, 0.05-0.10 on a 15-30 degree
+# roof's ridge; at most 0.004 on trimesh's clean tori (32 x 12 to 64 x 16), 0.027 on
+# decimated tori and ellipsoids; Gaussian noise of 0.05 % of the diagonal along the normals
+# 0.01-0.03 (99th percentile), of 0.1 % 0.02-0.05 (there the jet's noise, close to the
+# rings', keeps the MLS surface out either way). A cube's faces, rows at least a radius from
+# its edges, the blend forced, mean |k1| + |k2|: 2.5e-5 (the jet's noise alone the same),
+# without the creases 0.18.
+CREASE = 0.04
 
 # MLS passes: each one after the first fits the normals of the one before (the MLS surface's
 # own, where the blend gives it the larger share). The circle fits' normals are 0.2-0.7 degrees
@@ -177,7 +210,8 @@ def estimate(v, f, radii, query, circle_fits, use_kring=True, coarse=True, probe
                   for blend, scale in zip(blended, scales)]
         fitted = np.unique(np.concatenate([chain[0] for chain in chains]))
         bases = circle_fits(fitted)
-    return [_passes(base, fitted, chain, scale)
+    ring = _ring(scales[0], f) if f is not None and any(len(c) > 1 for c in chains) else None
+    return [_passes(base, fitted, chain, scale, ring)
             for base, chain, scale in zip(bases, chains, scales)]
 
 
@@ -246,11 +280,31 @@ def _limited(base, fitted, probe, scale):
                             scale.h[probe], scale.probe_search, scale.unit)
 
 
-def _passes(base, fitted, chain, scale):
+class _Ring(NamedTuple):
+    """A mesh's noise measured over its rings (:func:`meshcurv.ring_noise.ring_noise`),
+    (n,), model units, and whether each vertex lies on a crease (n,) bool."""
+    noise: np.ndarray
+    crease: np.ndarray
+
+
+def _ring(scale, f):
+    """The :class:`_Ring` of the mesh of faces ``f`` through the points of the
+    :class:`_Scale` ``scale`` (whose unit keeps their squares finite): a crease where the
+    rings' noise is at least :data:`CREASE` times the vertex's mean edge length."""
+    noise, edge = ring_noise(scale.v, f)
+    with np.errstate(invalid="ignore"):
+        return _Ring(noise / scale.unit, noise >= CREASE * edge)
+
+
+def _passes(base, fitted, chain, scale, ring=None):
     """The circle fits' result ``base`` at the rows ``fitted`` (ascending) blended with an
     MLS pass over the rows of each of ``chain[1:]`` (:func:`_chain`; none: ``base``) at the
     :class:`_Scale` ``scale``; at the rows ``chain[-1]``."""
-    normals, weights, noise = _field(base, fitted, len(scale.v))
+    normals, weights, jet_noise = _field(base, fitted, len(scale.v))
+    noise, crease = jet_noise, None
+    if ring is not None:                # the smaller, where the jet measured one
+        noise = np.where(np.isnan(jet_noise), jet_noise, np.fmin(jet_noise, ring.noise))
+        crease = ring.crease
     part = _rows(base, fitted, chain[-1])
     for i, rows in enumerate(chain[1:], start=2):
         part = _rows(base, fitted, rows)
@@ -263,7 +317,7 @@ def _passes(base, fitted, chain, scale):
         else:
             out = {"normals": np.empty((len(rows), 3))}
         mls_rows(part, rows, scale.v, normals, weights, scale.h[rows], scale.search,
-                 scale.unit, out=out, noise=noise)
+                 scale.unit, out=out, noise=noise, rough_noise=jet_noise, crease=crease)
         normals[rows] = out["normals"]
     return part
 
@@ -348,7 +402,7 @@ BLENDED = ("k1", "k2", "d1", "d2", "normals")
 
 
 def mls_rows(result, rows, v, normals, point_weights, h, search, unit=1.0, block=BLOCK,
-             out=None, noise=None):
+             out=None, noise=None, rough_noise=None, crease=None):
     """The MLS estimate of the rows ``rows`` of ``result`` (vertex indices, (m,)), blended
     into its fields (k1, k2, d1, d2, normals) by the noise of the row's support (module
     docstring, :func:`support_noise`): a dict of the blended fields, ``out`` (the arrays to
@@ -362,10 +416,11 @@ def mls_rows(result, rows, v, normals, point_weights, h, search, unit=1.0, block
     ``normals`` (n, 3): unit normals of every vertex the supports reach (NaN: left out);
     ``point_weights`` (n,) or None: the outlier weights; ``h`` (m,): each row's support;
     ``search(idx)``: CSR lists ``(indptr, indices)`` about the vertices ``idx`` holding every
-    vertex within ``h``; ``noise`` (n,): the noise the local jet measured at
-    every vertex the supports reach (model units, NaN: unknown), None: the rows' own
-    (``result.noise``) alone. Rows ``result`` has no estimate for, and rows whose MLS fit
-    fails, keep the circle fits'.
+    vertex within ``h``; ``noise`` (n,): the noise measured at every vertex the supports
+    reach (model units, NaN: unknown), None: the rows' own (``result.noise``) alone;
+    ``rough_noise`` (n,): the noise that tells the rough points (:data:`ROUGH_NOISE`, default
+    ``noise``); ``crease`` (n,) bool or None: see :func:`support_noise`. Rows ``result`` has
+    no estimate for, and rows whose MLS fit fails, keep the circle fits'.
     """
     m = len(rows)
     scale = NOISE_SCALE * result.radius
@@ -376,13 +431,14 @@ def mls_rows(result, rows, v, normals, point_weights, h, search, unit=1.0, block
     curvatures = "k1" in out
     if noise is not None:
         with np.errstate(invalid="ignore"):
-            rough = np.where(noise >= ROUGH_NOISE * scale, noise, np.nan)
+            judged = noise if rough_noise is None else rough_noise
+            rough = np.where(judged >= ROUGH_NOISE * scale, judged, np.nan)
     for lo in range(0, m, block):
         sl = slice(lo, min(m, lo + block))
         idx = rows[sl]
         lists = search(idx)
         row_noise = result.noise[sl] if noise is None else \
-            support_noise(idx, v, noise, rough, h[sl], lists)
+            support_noise(idx, v, noise, rough, h[sl], lists, crease)
         # the block's lists serve its one MLS block
         if curvatures:
             k1, k2, d1, d2, n = _mls_curvatures(idx, v, normals, result.normals[sl], h[sl],
@@ -406,12 +462,14 @@ def mls_rows(result, rows, v, normals, point_weights, h, search, unit=1.0, block
     return out
 
 
-def support_noise(rows, v, noise, rough, h, lists):
+def support_noise(rows, v, noise, rough, h, lists, crease=None):
     """The noise (m,) that sets the MLS share of the vertex indices ``rows``: the largest
     of ``noise`` ((n,), model units) at the row and of ``rough`` ((n,), the noise of the
     rough points, NaN elsewhere) at the points within its support ``h`` ((m,), in the units
     of ``v``); NaN where the row's own is. ``lists``: CSR ``(indptr, indices)`` about the
-    rows, holding every vertex within ``h`` (arguments as :func:`mls_rows`).
+    rows, holding every vertex within ``h`` (arguments as :func:`mls_rows`); ``crease``
+    ((n,) bool): the rough points count only for rows whose support holds a crease vertex
+    (None: for every row).
 
     The MLS surface of a row is smooth over its whole support: where that reaches a sharp
     edge (the local jet's residual there 0.03-0.05 of the radius, against 1e-4 on the faces
@@ -422,6 +480,10 @@ def support_noise(rows, v, noise, rough, h, lists):
     the caps (the circle fits alone: 0.016 and 0)."""
     top = np.empty(len(rows))
     ball_max(v, v[rows], *lists, h * h, rough, top)
+    if crease is not None:
+        near = np.empty(len(rows))
+        ball_max(v, v[rows], *lists, h * h, np.where(crease, 1.0, np.nan), near)
+        top[np.isnan(near)] = np.nan
     # NaN at the row stays (no share); NaN neighbours are left out
     return np.maximum(noise[rows], np.where(np.isnan(top), -np.inf, top))
 

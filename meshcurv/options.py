@@ -268,7 +268,8 @@ class Options:
         curvature of the MLS surface of oriented spheres through the points and the circle
         fits' normals (:mod:`meshcurv.coarse`; trimesh tori of 16-32 vertices around the
         tube: mean |dk| 0.0019-0.018 instead of 0.022-0.069 on the meshes, 0.0025-0.018
-        instead of 0.019-0.068 on their points alone); the normals, d1 and d2 of those rows are
+        instead of 0.019-0.068 on their points alone; of 12, meshes, 0.0065-0.012 instead
+        of 0.054-0.195); the normals, d1 and d2 of those rows are
         the MLS surface's. Other inputs, at their default radius, a given radius or each of
         a list of radii, get the same blend where a probe of 256 rows finds the circle fits
         limited by a regular sampling (:func:`meshcurv.coarse.sampling_limited`: tori of

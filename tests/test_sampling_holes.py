@@ -265,7 +265,8 @@ def test_a_torus_whose_balls_first_thicken_as_they_shrink_gets_a_local_patch(rad
     # WRAPS_AROUND, re-estimated at half the radius 0.315 off by the default and left invalid
     # by "auto". Two steps take the flatness to 0.30 (0.12 at the third). Measured now: radius
     # 0.34, every row valid, mean |dk| 0.195 (0.183 with "auto" before it kept the default
-    # radius on coarse inputs), k1 = 3.3
+    # radius on coarse inputs), k1 = 3.3; 0.012 since the MLS blend reads the rings' noise
+    # (test_ring_noise)
     t = trimesh.creation.torus(1.0, 0.3, major_sections=32, minor_sections=12)
     v = np.asarray(t.vertices)
     truth = surfaces.torus_at(v, 1.0, 0.3)
@@ -273,7 +274,7 @@ def test_a_torus_whose_balls_first_thicken_as_they_shrink_gets_a_local_patch(rad
     res = meshcurv.principal_curvatures(v, t.faces, radius=radius)
     # no ring flagged as spikes (see test_robust_points: a ridge of a coarse grid)
     assert res.valid.all()
-    assert np.mean(0.5 * (np.abs(res.k1 - truth.k1) + np.abs(res.k2 - truth.k2))) < 0.25
+    assert np.mean(0.5 * (np.abs(res.k1 - truth.k1) + np.abs(res.k2 - truth.k2))) < 0.02
 
 
 def test_a_noisy_or_fine_meshs_default_radius_is_the_density_radius():

@@ -36,14 +36,14 @@ against 0.0074 on the first torus) and the 0.3 % row lost more (0.072 on the fir
 
 The jet's residual also holds what a quadric leaves of the shape within the ball: on
 trimesh's 32 x 12 tori 1 / 0.3 and 3 / 1 (balls of ~10 vertices) 0.067 and 0.055 of the
-radius (median), which kept the MLS surface out (mean |dk| 0.195 and 0.053, the circle fits'). On meshes a row's own
-noise is the smaller of the jet's and the noise measured over the mesh's rings
-(:mod:`meshcurv.ring_noise`, within a few percent of the noise added, 0.0016 of the radius
-there clean), and the rough points of a row's support (:data:`ROUGH_NOISE`) count where the
-support reaches a crease (:data:`CREASE`). Mean |dk|, the jet's noise -> the smaller, and
-the change on the four tori above (in that order) and on trimesh's 5 % decimation of a
-240 x 60 torus 2 / 0.5 (measured once with a script; the circle fits alone on the 32 x 12
-tori: 0.054 and 0.195 clean):
+radius (median), which kept the MLS surface out (mean |dk| 0.195 and 0.053, the circle
+fits'). On meshes a row's own noise is the smaller of the jet's and the noise measured over
+the mesh's rings (:mod:`meshcurv.ring_noise`, within a few percent of the noise added,
+0.0016 of the radius there clean), and the rough points of a row's support
+(:data:`ROUGH_NOISE`) count where the support reaches a crease (:data:`CREASE`). Mean
+|dk|, the jet's noise -> the smaller, and the change on the four tori above (in that order)
+and on MeshLab's 5 % decimation of a 240 x 60 torus 2 / 0.5 (measured once with a script;
+the circle fits alone on the 32 x 12 tori: 0.054 and 0.195 clean):
 
 ======  ===============  ===============  ======================  ===============
 noise   32 x 12 3 / 1    32 x 12 1 / 0.3  the four above          5 % decimation
@@ -76,7 +76,7 @@ from scipy.spatial import cKDTree
 
 from .fit.mls import mls_curvature, mls_normals
 from .fit.outliers import outlier_weight
-from .neighbors import ball_counts, ball_grid, power_of_two_scale
+from .neighbors import ball_counts, ball_grid, edge_adjacency, power_of_two_scale
 from .neighbors.csr import ball_max
 from .neighbors.radius import _longest_edges
 from .pipeline import (BLOCK, _sample_queries, _search_like, ball_search, clean_fraction,
@@ -189,7 +189,9 @@ def estimate(v, f, radii, query, circle_fits, use_kring=True, coarse=True, probe
     if n == 0:                      # nothing to probe or blend
         return circle_fits(np.arange(0))
     whole = query is None or (len(query) == n and np.array_equal(query, np.arange(n)))
-    scales = [_supports(v, f, r, use_kring, probed=not coarse) for r in radii]
+    # one edge adjacency serves every radius's k-rings and the rings' noise
+    adjacency = edge_adjacency(f, n) if f is not None and use_kring else None
+    scales = [_supports(v, f, r, use_kring, not coarse, adjacency) for r in radii]
     probe = _sample_queries(n, PROBE_ROWS)
     blended = [True] * len(radii) if coarse else None
     if blended is None and not (whole and probe_fits is None):
@@ -210,7 +212,8 @@ def estimate(v, f, radii, query, circle_fits, use_kring=True, coarse=True, probe
                   for blend, scale in zip(blended, scales)]
         fitted = np.unique(np.concatenate([chain[0] for chain in chains]))
         bases = circle_fits(fitted)
-    ring = _ring(scales[0], f) if f is not None and any(len(c) > 1 for c in chains) else None
+    ring = _ring(scales[0], f, adjacency) if f is not None and any(len(c) > 1 for c in chains) \
+        else None
     return [_passes(base, fitted, chain, scale, ring)
             for base, chain, scale in zip(bases, chains, scales)]
 
@@ -227,12 +230,12 @@ class _Scale(NamedTuple):
     probe_search: Callable
 
 
-def _supports(v, f, radius, use_kring, probed):
-    """The :class:`_Scale` of ``radius``: lists over the mesh's k-rings (``use_kring``, one
-    edge adjacency for both) or in balls. The passes' lists reach the largest support, the
-    probe's ``PROBE_SCALE`` times it; but a ball search lists in the order of its grid, whose
-    cells follow its reach, so where the input is ``probed`` the passes read the probe's ball
-    lists (the order of the sums the golden outputs record)."""
+def _supports(v, f, radius, use_kring, probed, adjacency=None):
+    """The :class:`_Scale` of ``radius``: lists over the mesh's k-rings (``use_kring``, over
+    its edge ``adjacency``, made here if None) or in balls. The passes' lists reach the
+    largest support, the probe's ``PROBE_SCALE`` times it; but a ball search lists in the
+    order of its grid, whose cells follow its reach, so where the input is ``probed`` the
+    passes read the probe's ball lists (the order of the sums the golden outputs record)."""
     unit = power_of_two_scale(radius)
     with np.errstate(over="ignore"):
         vs = v * unit if unit != 1.0 else v
@@ -240,7 +243,8 @@ def _supports(v, f, radius, use_kring, probed):
     reach = float(h.max())
     wide = reach * (PROBE_SCALE if probed else 1.0)
     finite = None if use_kring else np.flatnonzero(np.isfinite(vs).all(axis=1))
-    search = kring_search(vs, f, reach) if use_kring else ball_search(vs, finite, wide)
+    search = kring_search(vs, f, reach, adjacency) if use_kring else \
+        ball_search(vs, finite, wide)
     probe_search = _search_like(search, vs, f, finite, wide) if use_kring else search
     return _Scale(unit, vs, h, _lists(search), _lists(probe_search))
 
@@ -287,11 +291,12 @@ class _Ring(NamedTuple):
     crease: np.ndarray
 
 
-def _ring(scale, f):
+def _ring(scale, f, adjacency=None):
     """The :class:`_Ring` of the mesh of faces ``f`` through the points of the
     :class:`_Scale` ``scale`` (whose unit keeps their squares finite): a crease where the
-    rings' noise is at least :data:`CREASE` times the vertex's mean edge length."""
-    noise, edge = ring_noise(scale.v, f)
+    rings' noise is at least :data:`CREASE` times the vertex's mean edge length;
+    ``adjacency``: the mesh's edge adjacency, if already made."""
+    noise, edge = ring_noise(scale.v, f, adjacency)
     with np.errstate(invalid="ignore"):
         return _Ring(noise / scale.unit, noise >= CREASE * edge)
 

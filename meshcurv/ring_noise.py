@@ -23,23 +23,24 @@ the sampling is uneven, as at a sharp edge; callers take the smaller of it and t
 import numpy as np
 import scipy.sparse as sp
 
-from .neighbors.kring import edge_adjacency
+from .neighbors import edge_adjacency
 from .normals import face_vertex_normals
 from .normals.winding import coherent_faces
 
 __all__ = ["ring_noise"]
 
 
-def ring_noise(v, f):
+def ring_noise(v, f, adjacency=None):
     """``(noise, edge)``, (n,) each, of the mesh ``v`` (n, 3), ``f`` (m, 3): the noise sigma
     of each vertex along its normal (module docstring) and the mean length of its edges, model
     units. Noise NaN where a vertex within 3 rings has no normal (a vertex in no face) or is
     not finite, edge NaN at a vertex in no face. The normals are the area-weighted ones of the
     faces wound coherently (:func:`meshcurv.normals.winding.coherent_faces`): the faces'
-    winding, and faces listed twice, do not matter."""
+    winding, and faces listed twice, do not matter. ``adjacency``: the mesh's
+    :func:`meshcurv.neighbors.edge_adjacency`, if already made."""
     v = np.asarray(v, dtype=np.float64)
     n = len(v)
-    indptr, indices = edge_adjacency(f, n)
+    indptr, indices = edge_adjacency(f, n) if adjacency is None else adjacency
     counts = np.diff(indptr)
     rows = np.repeat(np.arange(n), counts)
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):

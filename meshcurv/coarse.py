@@ -124,10 +124,11 @@ ROUGH_NOISE = 2.0
 
 
 # The rings' noise (:mod:`meshcurv.ring_noise`) over the mean edge length from which a vertex
-# lies on a crease. Measured: 0.13-0.17 on the edges of cubes, 0.05-0.10 on a 15-30 degree
-# roof's ridge; at most 0.004 on trimesh's clean tori (32 x 12 to 64 x 16), 0.027 on
+# lies on a crease. Measured: 0.13-0.17 on the edges of cubes, a median of 0.05-0.10 on a
+# 15-30 degree roof's ridge (its lowest vertices 0.02-0.03: a shallow ridge is a crease in
+# part); at most 0.004 on trimesh's clean tori 32 x 12 to 64 x 16 (0.010 on 24 x 8), 0.027 on
 # decimated tori and ellipsoids; Gaussian noise of 0.05 % of the diagonal along the normals
-# 0.01-0.03 (99th percentile), of 0.1 % 0.02-0.05 (there the jet's noise, close to the
+# 0.015-0.022 (99th percentile), of 0.1 % 0.02-0.05 (there the jet's noise, close to the
 # rings', keeps the MLS surface out either way). A cube's faces, rows at least a radius from
 # its edges, the blend forced, mean |k1| + |k2|: 2.5e-5 (the jet's noise alone the same),
 # without the creases 0.18.

@@ -19,6 +19,12 @@ trimesh's tori (32 x 12 to 200 x 50) and MeshLab's decimations of a torus and an
 the RMS over the vertices within 5 % of its sigma. An uneven sampling reads as noise (its
 ``h`` differs from vertex to vertex), so the estimate is an upper bound of the noise where
 the sampling is uneven, as at a sharp edge; callers take the smaller of it and the jet's.
+
+:func:`meshcurv.normals.face_normal_error` measures the same noise from the first
+differences of the umbrella heights with one calibration for a regular triangulation
+(``UMBRELLA_NOISE``): on the meshes above, noisy, 0-16 % above this estimate; clean,
+1.2-10x above it (trimesh's 32 x 12 torus 1 / 0.3: 0.0023 against 0.0007, RMS), still 10x
+below the jet's there.
 """
 
 import numpy as np

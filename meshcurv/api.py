@@ -10,6 +10,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from . import coarse as coarse_mls, pipeline, scale as scale_select, weld
+from .area_weights import vertex_area_weights
 from .inputs import as_arrays
 from .neighbors import MAX_BALL_FRACTION, default_radius, power_of_two_scale
 from .options import Options, resolve_plan
@@ -318,7 +319,8 @@ def _estimate(v, f, given_normals, radius, query, plan, progress):
             def default_radius(rows):
                 return _run_radii(v, f, given_normals, [r0], rows, plan, progress)
             res = coarse_mls.estimate(v, f, [r0], query, per_vertex_scale, plan.use_kring,
-                                      coarse, probe_fits=default_radius)[0]
+                                      coarse, probe_fits=default_radius,
+                                      area=_area_weights(v, f, plan))[0]
         else:
             res = per_vertex_scale(query)[0]
     else:
@@ -383,7 +385,14 @@ def _blended(v, f, given_normals, radii, query, plan, progress, coarse):
     (:func:`meshcurv.coarse.estimate`); a list of results."""
     def circle_fits(rows):
         return _run_radii(v, f, given_normals, radii, rows, plan, progress)
-    return coarse_mls.estimate(v, f, radii, query, circle_fits, plan.use_kring, coarse)
+    return coarse_mls.estimate(v, f, radii, query, circle_fits, plan.use_kring, coarse,
+                               area=_area_weights(v, f, plan))
+
+
+def _area_weights(v, f, plan):
+    """A mesh's area weights (:func:`meshcurv.area_weights.vertex_area_weights`) where the
+    plan weighs by them, else None."""
+    return vertex_area_weights(v, f) if plan.area_weights else None
 
 
 def _run_radii(v, f, given_normals, radii, query, plan, progress):

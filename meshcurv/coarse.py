@@ -169,7 +169,8 @@ PROBE_SCALE = float(np.sqrt(2.0))
 DISAGREEMENT_RATIO = 2.2
 
 
-def estimate(v, f, radii, query, circle_fits, use_kring=True, coarse=True, probe_fits=None):
+def estimate(v, f, radii, query, circle_fits, use_kring=True, coarse=True, probe_fits=None,
+             area=None):
     """The curvature of a mesh or cloud at each radius of the list ``radii`` (a list of
     results, rows ``query``, all: None, in its order): the circle fits' result blended with
     :data:`PASSES` MLS passes (:func:`mls_rows`) where the input is ``coarse`` for its shape
@@ -184,7 +185,10 @@ def estimate(v, f, radii, query, circle_fits, use_kring=True, coarse=True, probe
     reach and those rows' MLS passes where the next pass's supports do, so that every row is
     the whole input's. Supports are searched over the mesh's k-rings (``use_kring``) or in
     balls (clouds: ``f`` None). The MLS fits run on coordinates scaled by the power of two
-    that keeps the radius's square finite (the same curvatures at any scale).
+    that keeps the radius's square finite (the same curvatures at any scale). ``area`` (n,):
+    the vertices' area weights (:func:`meshcurv.area_weights.vertex_area_weights`) the MLS
+    fits take with the outlier weights, as the circle fits did; None: the outlier weights
+    alone.
     """
     n = len(v)
     if n == 0:                      # nothing to probe or blend
@@ -198,13 +202,13 @@ def estimate(v, f, radii, query, circle_fits, use_kring=True, coarse=True, probe
     if blended is None and not (whole and probe_fits is None):
         near = np.unique(np.concatenate([probe] + [scale.probe_search(probe)[1]
                                                    for scale in scales]))
-        blended = [_limited(base, near, probe, scale)
+        blended = [_limited(base, near, probe, scale, area)
                    for base, scale in zip((probe_fits or circle_fits)(near), scales)]
     if whole:
         fitted = np.arange(n)
         bases = circle_fits(fitted)
         if blended is None:
-            blended = [_limited(base, fitted, probe, scale)
+            blended = [_limited(base, fitted, probe, scale, area)
                        for base, scale in zip(bases, scales)]
         chains = [[fitted] * (1 + PASSES * blend) for blend in blended]
     else:
@@ -215,7 +219,7 @@ def estimate(v, f, radii, query, circle_fits, use_kring=True, coarse=True, probe
         bases = circle_fits(fitted)
     ring = _ring(scales[0], f, adjacency) if f is not None and any(len(c) > 1 for c in chains) \
         else None
-    return [_passes(base, fitted, chain, scale, ring)
+    return [_passes(base, fitted, chain, scale, ring, area)
             for base, chain, scale in zip(bases, chains, scales)]
 
 
@@ -265,22 +269,23 @@ def _rows(result, fitted, rows):
     return result if rows is fitted else expand_rows(result, np.searchsorted(fitted, rows))
 
 
-def _field(result, fitted, n):
+def _field(result, fitted, n, area=None):
     """The circle fits' normals (n, 3), outlier weights (n,) and measured noise (n,) at the
-    rows ``fitted`` of ``result``; NaN normals and noise and weight 1 elsewhere."""
+    rows ``fitted`` of ``result``; NaN normals and noise and weight 1 elsewhere; the weights
+    times ``area`` (n,) where given."""
     normals = np.full((n, 3), np.nan)
     normals[fitted] = result.normals
     weights = np.ones(n)
     weights[fitted] = outlier_weight(result.outlier_score)
     noise = np.full(n, np.nan)
     noise[fitted] = result.noise
-    return normals, weights, noise
+    return normals, (weights if area is None else weights * area), noise
 
 
-def _limited(base, fitted, probe, scale):
+def _limited(base, fitted, probe, scale, area=None):
     """:func:`sampling_limited` at the rows ``probe`` of the circle fits' ``base`` (rows
-    ``fitted``, ascending) at the :class:`_Scale` ``scale``."""
-    normals, weights, _ = _field(base, fitted, len(scale.v))
+    ``fitted``, ascending) at the :class:`_Scale` ``scale``; ``area``: see :func:`_field`."""
+    normals, weights, _ = _field(base, fitted, len(scale.v), area)
     return sampling_limited(_rows(base, fitted, probe), probe, scale.v, normals, weights,
                             scale.h[probe], scale.probe_search, scale.unit)
 
@@ -302,11 +307,11 @@ def _ring(scale, f, adjacency=None):
         return _Ring(noise / scale.unit, noise >= CREASE * edge)
 
 
-def _passes(base, fitted, chain, scale, ring=None):
+def _passes(base, fitted, chain, scale, ring=None, area=None):
     """The circle fits' result ``base`` at the rows ``fitted`` (ascending) blended with an
     MLS pass over the rows of each of ``chain[1:]`` (:func:`_chain`; none: ``base``) at the
-    :class:`_Scale` ``scale``; at the rows ``chain[-1]``."""
-    normals, weights, jet_noise = _field(base, fitted, len(scale.v))
+    :class:`_Scale` ``scale``; at the rows ``chain[-1]``; ``area``: see :func:`_field`."""
+    normals, weights, jet_noise = _field(base, fitted, len(scale.v), area)
     noise, crease = jet_noise, None
     if ring is not None:                # the smaller, where the jet measured one
         noise = np.where(np.isnan(jet_noise), jet_noise, np.fmin(jet_noise, ring.noise))

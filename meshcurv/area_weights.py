@@ -1,23 +1,26 @@
-"""Point weights of a mesh's vertices by the area each stands for: every fit then sums over
-the surface rather than over the sampling.
+"""Point weights of a mesh's vertices by the area each stands for, for the MLS surface's fits
+(:mod:`meshcurv.coarse`): they then sum over the surface rather than over the sampling.
 
 A least-squares fit over a neighbourhood weighs each point alike; where the sampling is
 denser on one side of a vertex (a mesh decimated by edge collapse keeps more vertices where
-the surface bends more; a scan's overlap) the fit follows that side, and where curvature
-varies across the ball that is an error of the estimate. Weighting each vertex by its share
-of the surface (a third of the area of its faces) turns every sum into a quadrature of the
-surface integral it stands for. Fits are unchanged by a common factor of their weights, so
-an even sampling gives what it gave unweighted.
+the surface bends more) the fit follows that side, and where curvature varies across the
+support that is an error of the estimate. Weighting each vertex by its share of the surface
+(a third of the area of its faces) turns every sum into a quadrature of the surface integral
+it stands for. The MLS fit weighs every point of its support, the evaluation point included,
+by its weight, so a common factor changes nothing: vertices of equal areas give what they
+gave.
 """
 
 import numpy as np
+
+from .neighbors import power_of_two_scale
 
 __all__ = ["vertex_area_weights"]
 
 
 def vertex_area_weights(vertices, faces):
-    """Each vertex's area weight (n,) in [0, 1]: a third of the area of its faces, over the
-    largest such area.
+    """Each vertex's area weight (n,) in [0, 1]: a third of the area of its faces (each
+    distinct triangle once, whatever its winding or repeats), over the largest such area.
 
     Parameters
     ----------
@@ -26,13 +29,32 @@ def vertex_area_weights(vertices, faces):
     Returns
     -------
     (n,) float64: 0 at vertices whose faces are all degenerate (no area to stand for); at
-    vertices in no face (or with non-finite faces only) the median of the others' (a point of
-    the mesh's typical share); 1 everywhere where no face has an area.
+    vertices in no face (or in non-finite faces only) the median of the others' (a point of
+    the mesh's typical share); 1 everywhere where no face has an area. The same bits for the
+    faces in any order and winding, and for the vertices scaled by any power of two (areas
+    are taken on coordinates scaled by the one that keeps the extent's squares finite).
     """
     v = np.asarray(vertices, dtype=np.float64)
-    f = np.asarray(faces, dtype=np.int64)
     n = len(v)
-    twice = np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
+    # each triangle once, its corners in ascending order: the same cross product however
+    # the face was wound, rotated or repeated
+    f = np.sort(np.asarray(faces, dtype=np.int64), axis=1)
+    f = f[np.lexsort(f.T[::-1])]
+    f = f[np.r_[True, (f[1:] != f[:-1]).any(axis=1)]] if len(f) else f
+    if len(f) == 0:
+        return np.ones(n)
+    with np.errstate(invalid="ignore", over="ignore"):
+        a = v[f[:, 1]] - v[f[:, 0]]
+        b = v[f[:, 2]] - v[f[:, 0]]
+        unit = power_of_two_scale(max(np.nanmax(np.abs(a), initial=0.0),
+                                      np.nanmax(np.abs(b), initial=0.0)))
+        if unit != 1.0:
+            a *= unit
+            b *= unit
+        # twice the area: the length of the edges' cross product
+        twice = np.sqrt((a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]) ** 2
+                        + (a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]) ** 2
+                        + (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]) ** 2)
     finite = np.isfinite(twice)
     area = np.bincount(f[finite].ravel(), weights=np.repeat(twice[finite], 3), minlength=n)
     referenced = np.bincount(f[finite].ravel(), minlength=n) > 0

@@ -278,16 +278,20 @@ class Options:
         circle fits' bits; ``radius="auto"`` is blended where its default radius is.
         "circles": the circle fits alone.
     area_weights : bool, default True
-        On a mesh, every vertex weighs in the curvature fits (the local jet, the circle
-        fits, the MLS surface; not the normals' plane fits) by the area it stands for, a
-        third of its faces' areas (:mod:`meshcurv.area_weights`), times its outlier weight:
-        the fits sum over the surface, not over the sampling, where that is uneven. Meshes
-        decimated by MeshLab's quadric edge collapse (denser where the surface bends more),
-        mean |dk|: ellipsoid at 10 % and 2 % 0.0105 -> 0.0029 and 0.073 -> 0.069, torus at
-        20 % and 5 % 0.029 -> 0.026 and 0.022 -> 0.018; random-vertex (Delaunay) egg crate
-        and saddle 0.0012 -> 0.0010 and 0.0005 -> 0.0004; tori with 0.1 % noise +2 %; coarse
-        tori -15 % to +11 % (README). Clouds have no faces: unweighted. False: every vertex
-        weighs alike.
+        On a mesh, every vertex weighs in the MLS surface's fits (the probe of
+        ``coarse_fit`` and the blend's passes) by the area it stands for, a third of its
+        faces' areas (:mod:`meshcurv.area_weights`), times its outlier weight: those fits
+        sum over the surface, not over the sampling, where that is uneven. They weigh the
+        evaluation point like the others, so vertices of equal areas give what they gave;
+        the probe blends where the weighted or the unweighted MLS surface finds the circle
+        fits limited (:func:`meshcurv.coarse.estimate`). Meshes decimated by MeshLab's
+        quadric edge collapse (denser where the surface bends more), mean |dk|: ellipsoid
+        at 10 % 0.0105 -> 0.0029 (the probe now takes the blend), torus at 5 % 0.022 ->
+        0.018; coarse tori -15 % to +11 % (README). The circle fits and the local jet stay
+        unweighted: they weigh the vertex itself 1 whatever its neighbours weigh, so a mesh
+        with parts of very different vertex spacing lost rows there, and weighted they cost
+        the tori with 0.1 % noise 2 % (the normals' plane fits weighted too: 70 %). Clouds
+        have no faces: unweighted. False: every vertex weighs alike.
 
     Examples
     --------
@@ -369,7 +373,7 @@ class Plan(NamedTuple):
     normals at sigma_eps 0.1, mean |dH| 0.0095 with the field at each radius, 0.0119 with it
     wider). ``coarse_mls``: inputs coarse for their shape, at their default radius, blended
     with the MLS surface's curvature (:mod:`meshcurv.coarse`). ``area_weights``: a mesh's
-    vertices weighted by their areas in every fit (:mod:`meshcurv.area_weights`).
+    vertices weighted by their areas in the MLS surface's fits (:mod:`meshcurv.area_weights`).
     """
 
     use_kring: bool

@@ -14,7 +14,6 @@ from scipy.spatial import cKDTree
 from scipy.stats import chi2
 from tqdm.auto import tqdm
 
-from .area_weights import vertex_area_weights
 from .fit import fused, jet, outliers, wrap
 from .fit.constants import NOISE_SCALE, TUKEY_C
 from .fit.extrapolate import BIAS_RATIO, extrapolate_to_zero
@@ -1136,7 +1135,7 @@ def run_radii(v, f, given_normals, radii, query, plan, progress=False):
             qb = _block_normals(sc.block_normals, sc.face_normals, idx, xb, indptr, indices,
                                 sc.radius, sc.search, plan, sc.weights, sc.face_weight)
             _fit_block(out, pos, xb, qb, indptr, indices, sc.radius, sc.search, plan,
-                       sc.given_a2, sc.field, sc.fit_weights, side, flatness)
+                       sc.given_a2, sc.field, sc.weights, side, flatness)
             del indptr, indices
         del lists
     results = []
@@ -1167,9 +1166,7 @@ class _Scale(NamedTuple):
     :func:`_start_normals` (and its ``face_weight``); ``block_normals``, the same or the
     plane-fit field of
     :func:`_pca_field`; ``given_a2`` (:func:`given_normal_noise`); ``field``, the neighbors'
-    normals of the normal-aware fits (:func:`_normal_field`) or None; ``fit_weights``, the
-    curvature fits' point weights (by row of ``search.points``): ``weights`` times a mesh's
-    area weights (``Plan.area_weights``), or ``weights``."""
+    normals of the normal-aware fits (:func:`_normal_field`) or None."""
 
     radius: float
     search: Search
@@ -1182,7 +1179,6 @@ class _Scale(NamedTuple):
     given_a2: float
     field: object
     face_weight: object = None
-    fit_weights: object = None
 
 
 def _repair_note(m, turned, repeated):
@@ -1257,15 +1253,8 @@ def _prepare_scale(v, f, given_normals, r, s, finite, query, block, plan, progre
                              halves)
     elif reweigh:
         field = _pca_field(v, nv, s, finite, r, plan, progress, weights)
-    # the curvature fits weigh a mesh's vertices by their areas too; the normals' fits do
-    # not (with them as well, the torus 240 x 60 at 0.1 % noise lost 0.0104 -> 0.018 in
-    # mean |dk|, without them 0.0106)
-    fit_weights = weights
-    if plan.area_weights:
-        area = vertex_area_weights(v, f)
-        fit_weights = _by_row(area if weight is None else weight * area, s)
     return _Scale(r, s, score, weights, nv, face_normals, note, block_nv, given_a2,
-                  _normal_field(field, s, plan), face_weight, fit_weights)
+                  _normal_field(field, s, plan), face_weight)
 
 
 def _normal_rows_weigh(v, search, radius, plan, start):

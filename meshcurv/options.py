@@ -268,8 +268,8 @@ class Options:
         default radius: "mls" blends in, row by row as the measured noise allows, the
         curvature of the MLS surface of oriented spheres through the points and the circle
         fits' normals (:mod:`meshcurv.coarse`; trimesh tori of 16-32 vertices around the
-        tube: mean |dk| 0.0019-0.018 instead of 0.022-0.069 on the meshes, 0.0025-0.018
-        instead of 0.019-0.068 on their points alone; of 12, meshes, 0.0065-0.012 instead
+        tube: mean |dk| 0.0020-0.022 instead of 0.022-0.069 on the meshes, 0.0025-0.018
+        instead of 0.019-0.068 on their points alone; of 12, meshes, 0.0063-0.011 instead
         of 0.054-0.195); the normals, d1 and d2 of those rows are
         the MLS surface's. Other inputs, at their default radius, a given radius or each of
         a list of radii, get the same blend where a probe of 256 rows finds the circle fits

@@ -10,7 +10,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from . import coarse as coarse_mls, pipeline, scale as scale_select, weld
-from .area_weights import vertex_area_weights
+from .area_weights import cloud_area_weights, vertex_area_weights
 from .inputs import as_arrays
 from .neighbors import MAX_BALL_FRACTION, default_radius, power_of_two_scale
 from .options import Options, resolve_plan
@@ -390,9 +390,11 @@ def _blended(v, f, given_normals, radii, query, plan, progress, coarse):
 
 
 def _area_weights(v, f, plan):
-    """A mesh's area weights (:func:`meshcurv.area_weights.vertex_area_weights`) where the
-    plan weighs by them, else None."""
-    return vertex_area_weights(v, f) if plan.area_weights else None
+    """The points' area weights (:mod:`meshcurv.area_weights`: a mesh's vertices', or a
+    cloud's points') where the plan weighs by them, else None."""
+    if not plan.area_weights:
+        return None
+    return vertex_area_weights(v, f) if f is not None else cloud_area_weights(v)
 
 
 def _run_radii(v, f, given_normals, radii, query, plan, progress):

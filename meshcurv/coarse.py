@@ -186,9 +186,9 @@ def estimate(v, f, radii, query, circle_fits, use_kring=True, coarse=True, probe
     the whole input's. Supports are searched over the mesh's k-rings (``use_kring``) or in
     balls (clouds: ``f`` None). The MLS fits run on coordinates scaled by the power of two
     that keeps the radius's square finite (the same curvatures at any scale). ``area`` (n,):
-    the vertices' area weights (:func:`meshcurv.area_weights.vertex_area_weights`) the MLS
-    fits take with the outlier weights, as the circle fits did; None: the outlier weights
-    alone.
+    the points' area weights (:mod:`meshcurv.area_weights`), which the MLS fits take with the
+    outlier weights (the probe: with them or without them, :func:`_limited`); None: the
+    outlier weights alone.
     """
     n = len(v)
     if n == 0:                      # nothing to probe or blend

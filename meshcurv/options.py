@@ -278,20 +278,21 @@ class Options:
         circle fits' bits; ``radius="auto"`` is blended where its default radius is.
         "circles": the circle fits alone.
     area_weights : bool, default True
-        On a mesh, every vertex weighs in the MLS surface's fits (the probe of
-        ``coarse_fit`` and the blend's passes) by the area it stands for, a third of its
-        faces' areas (:mod:`meshcurv.area_weights`), times its outlier weight: those fits
-        sum over the surface, not over the sampling, where that is uneven. They weigh the
-        evaluation point like the others, so vertices of equal areas give what they gave;
-        the probe blends where the weighted or the unweighted MLS surface finds the circle
-        fits limited (:func:`meshcurv.coarse.estimate`). Meshes decimated by MeshLab's
-        quadric edge collapse (denser where the surface bends more), mean |dk|: ellipsoid
-        at 10 % 0.0105 -> 0.0029 (the probe now takes the blend), torus at 5 % 0.022 ->
-        0.018; coarse tori -15 % to +11 % (README). The circle fits and the local jet stay
-        unweighted: they weigh the vertex itself 1 whatever its neighbours weigh, so a mesh
-        with parts of very different vertex spacing lost rows there, and weighted they cost
-        the tori with 0.1 % noise 2 % (the normals' plane fits weighted too: 70 %). Clouds
-        have no faces: unweighted. False: every vertex weighs alike.
+        Every point weighs in the MLS surface's fits (the probe of ``coarse_fit`` and the
+        blend's passes) by the area it stands for, times its outlier weight: a mesh vertex
+        by a third of its faces' areas, a cloud point by the squared distance to its 6th
+        nearest (:mod:`meshcurv.area_weights`). Those fits then sum over the surface, not
+        over the sampling, where that is uneven; they weigh the evaluation point like the
+        others, so points of equal areas give what they gave. The probe blends where the
+        weighted or the unweighted MLS surface finds the circle fits limited
+        (:func:`meshcurv.coarse.estimate`). Meshes decimated by MeshLab's quadric edge
+        collapse (denser where the surface bends more), mean |dk|: ellipsoid at 10 % 0.0105
+        -> 0.0029 (the probe now takes the blend), torus at 5 % 0.022 -> 0.018; their points
+        alone 0.0103 -> 0.0036 and 0.024 -> 0.020; coarse tori -15 % to +11 % (README). The
+        circle fits and the local jet stay unweighted: they weigh the point itself 1
+        whatever its neighbours weigh, so a mesh with parts of very different vertex
+        spacing lost rows there, and weighted they cost the tori with 0.1 % noise 2 % (the
+        normals' plane fits weighted too: 70 %). False: every point weighs alike.
 
     Examples
     --------
@@ -372,8 +373,8 @@ class Plan(NamedTuple):
     ladder widens the balls themselves where the noise asks for it: CNC clouds without
     normals at sigma_eps 0.1, mean |dH| 0.0095 with the field at each radius, 0.0119 with it
     wider). ``coarse_mls``: inputs coarse for their shape, at their default radius, blended
-    with the MLS surface's curvature (:mod:`meshcurv.coarse`). ``area_weights``: a mesh's
-    vertices weighted by their areas in the MLS surface's fits (:mod:`meshcurv.area_weights`).
+    with the MLS surface's curvature (:mod:`meshcurv.coarse`). ``area_weights``: points
+    weighted by their areas in the MLS surface's fits (:mod:`meshcurv.area_weights`).
     """
 
     use_kring: bool
@@ -443,4 +444,4 @@ def resolve_plan(has_faces, has_normals, n_directions=8, neighborhood="auto", sl
                 bool(bias_correction), fit, normal_fit, has_normals and auto,
                 normal_constraints == "auto", bool(robust_points),
                 bool(sparse_retry), normals == "pca" and has_faces and normal_estimation == "auto",
-                coarse_mls=coarse_fit == "mls", area_weights=has_faces and bool(area_weights))
+                coarse_mls=coarse_fit == "mls", area_weights=bool(area_weights))

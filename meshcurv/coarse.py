@@ -283,8 +283,8 @@ def _field(result, fitted, n):
 
 def _limited(base, fitted, probe, scale, area=None):
     """:func:`sampling_limited` at the rows ``probe`` of the circle fits' ``base`` (rows
-    ``fitted``, ascending) at the :class:`_Scale` ``scale``; with ``area`` (the vertices'
-    area weights, (n,)), whether the MLS surface with them or without them finds them so.
+    ``fitted``, ascending) at the :class:`_Scale` ``scale``; with ``area`` (the points' area
+    weights, (n,)), whether the MLS surface with them or without them finds them so.
 
     Each MLS surface judges the circle fits against its own error: the weighted one is the
     more accurate where the sampling is uneven (MeshLab's decimations, ratio with and without
@@ -320,7 +320,7 @@ def _ring(scale, f, adjacency=None):
 def _passes(base, fitted, chain, scale, ring=None, area=None):
     """The circle fits' result ``base`` at the rows ``fitted`` (ascending) blended with an
     MLS pass over the rows of each of ``chain[1:]`` (:func:`_chain`; none: ``base``) at the
-    :class:`_Scale` ``scale``; at the rows ``chain[-1]``; ``area`` (n,): the vertices' area
+    :class:`_Scale` ``scale``; at the rows ``chain[-1]``; ``area`` (n,): the points' area
     weights, which the MLS fits take with the outlier weights (None: those alone)."""
     normals, weights, jet_noise = _field(base, fitted, len(scale.v))
     if area is not None:

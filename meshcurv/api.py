@@ -10,7 +10,6 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from . import coarse as coarse_mls, pipeline, scale as scale_select, weld
-from .area_weights import cloud_area_weights, vertex_area_weights
 from .inputs import as_arrays
 from .neighbors import MAX_BALL_FRACTION, default_radius, power_of_two_scale
 from .options import Options, resolve_plan
@@ -320,7 +319,7 @@ def _estimate(v, f, given_normals, radius, query, plan, progress):
                 return _run_radii(v, f, given_normals, [r0], rows, plan, progress)
             res = coarse_mls.estimate(v, f, [r0], query, per_vertex_scale, plan.use_kring,
                                       coarse, probe_fits=default_radius,
-                                      area=_area_weights(v, f, plan))[0]
+                                      area_weights=plan.area_weights)[0]
         else:
             res = per_vertex_scale(query)[0]
     else:
@@ -386,15 +385,7 @@ def _blended(v, f, given_normals, radii, query, plan, progress, coarse):
     def circle_fits(rows):
         return _run_radii(v, f, given_normals, radii, rows, plan, progress)
     return coarse_mls.estimate(v, f, radii, query, circle_fits, plan.use_kring, coarse,
-                               area=_area_weights(v, f, plan))
-
-
-def _area_weights(v, f, plan):
-    """The points' area weights (:mod:`meshcurv.area_weights`: a mesh's vertices', or a
-    cloud's points') where the plan weighs by them, else None."""
-    if not plan.area_weights:
-        return None
-    return vertex_area_weights(v, f) if f is not None else cloud_area_weights(v)
+                               area_weights=plan.area_weights)
 
 
 def _run_radii(v, f, given_normals, radii, query, plan, progress):

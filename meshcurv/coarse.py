@@ -74,6 +74,7 @@ from typing import Callable, NamedTuple
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .area_weights import cloud_area_weights, vertex_area_weights
 from .fit.mls import mls_curvature, mls_normals
 from .fit.outliers import outlier_weight
 from .neighbors import ball_counts, ball_grid, edge_adjacency, power_of_two_scale
@@ -170,7 +171,7 @@ DISAGREEMENT_RATIO = 2.2
 
 
 def estimate(v, f, radii, query, circle_fits, use_kring=True, coarse=True, probe_fits=None,
-             area=None):
+             area_weights=False):
     """The curvature of a mesh or cloud at each radius of the list ``radii`` (a list of
     results, rows ``query``, all: None, in its order): the circle fits' result blended with
     :data:`PASSES` MLS passes (:func:`mls_rows`) where the input is ``coarse`` for its shape
@@ -185,14 +186,17 @@ def estimate(v, f, radii, query, circle_fits, use_kring=True, coarse=True, probe
     reach and those rows' MLS passes where the next pass's supports do, so that every row is
     the whole input's. Supports are searched over the mesh's k-rings (``use_kring``) or in
     balls (clouds: ``f`` None). The MLS fits run on coordinates scaled by the power of two
-    that keeps the radius's square finite (the same curvatures at any scale). ``area`` (n,):
-    the points' area weights (:mod:`meshcurv.area_weights`), which the MLS fits take with the
-    outlier weights (the probe: with them or without them, :func:`_limited`); None: the
-    outlier weights alone.
+    that keeps the radius's square finite (the same curvatures at any scale). With
+    ``area_weights`` the MLS fits take the points' area weights (:mod:`meshcurv.area_weights`:
+    a mesh's vertices', a cloud's points') with the outlier weights (the probe: with them or
+    without them, :func:`_limited`); else the outlier weights alone.
     """
     n = len(v)
     if n == 0:                      # nothing to probe or blend
         return circle_fits(np.arange(0))
+    area = None
+    if area_weights:
+        area = vertex_area_weights(v, f) if f is not None else cloud_area_weights(v)
     whole = query is None or (len(query) == n and np.array_equal(query, np.arange(n)))
     # one edge adjacency serves every radius's k-rings and the rings' noise
     adjacency = edge_adjacency(f, n) if f is not None and use_kring else None

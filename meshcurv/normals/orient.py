@@ -180,14 +180,16 @@ def _farthest_neighbor_d2(points, neighbors, scale):
     return out
 
 
-def nearest_areas(points, query_points, radius, k):
+def nearest_areas(points, query_points, radius, k, workers=1):
     """:func:`sample_areas` of ``query_points`` (m, 3) whose graph is their ``k`` nearest
     ``points`` (n, 3) within ``radius`` (coincident ones left out), as the spanning tree's graph
-    from ball lists is: (m,) float64."""
+    from ball lists is: (m,) float64. ``workers``: the k-d tree query's threads (-1: all; the
+    same result)."""
     if len(points) == 0 or len(query_points) == 0:
         return np.zeros(len(query_points))
     kk = min(len(points), k + 8)         # room for coincident points
-    dist, _ = cKDTree(points).query(query_points, k=kk, distance_upper_bound=radius * (1 + 1e-12))
+    dist, _ = cKDTree(points).query(query_points, k=kk, distance_upper_bound=radius * (1 + 1e-12),
+                                    workers=workers)
     dist = np.asarray(dist).reshape(len(query_points), -1)
     dist = np.where((dist > 0) & np.isfinite(dist), dist, np.inf)
     dist = np.sort(dist, axis=1)[:, :k]

@@ -28,13 +28,16 @@ __all__ = ["vertex_area_weights", "cloud_area_weights", "CLOUD_RING_POINTS"]
 CLOUD_RING_POINTS = 6
 
 
-def vertex_area_weights(vertices, faces):
+def vertex_area_weights(vertices, faces, rows=None):
     """Each vertex's area weight (n,) in [0, 1]: a third of the area of its faces (each
     distinct triangle once, whatever its winding or repeats), over the largest such area.
 
     Parameters
     ----------
     vertices : (n, 3) float; faces : (m, 3) int, validated
+    rows : (k,) int, optional: only these vertices' weights, over the largest among them
+        (the others NaN): the same weights up to a common factor, which the MLS fits ignore,
+        from their faces alone
 
     Returns
     -------
@@ -47,13 +50,18 @@ def vertex_area_weights(vertices, faces):
     """
     v = np.asarray(vertices, dtype=np.float64)
     n = len(v)
+    faces = np.asarray(faces, dtype=np.int64)
+    if rows is not None:
+        wanted = np.zeros(n, dtype=bool)
+        wanted[rows] = True
+        faces = faces[wanted[faces].any(axis=1)] if len(faces) else faces
     # each triangle once, its corners in ascending order: the same cross product however
     # the face was wound, rotated or repeated
-    f = np.sort(np.asarray(faces, dtype=np.int64), axis=1)
+    f = np.sort(faces, axis=1)
     f = f[np.lexsort(f.T[::-1])]
     f = f[np.r_[True, (f[1:] != f[:-1]).any(axis=1)]] if len(f) else f
     if len(f) == 0:
-        return np.ones(n)
+        return _only(np.ones(n), rows)
     with np.errstate(invalid="ignore", over="ignore"):
         a = v[f[:, 1]] - v[f[:, 0]]
         b = v[f[:, 2]] - v[f[:, 0]]
@@ -69,36 +77,54 @@ def vertex_area_weights(vertices, faces):
     finite = np.isfinite(twice)
     area = np.bincount(f[finite].ravel(), weights=np.repeat(twice[finite], 3), minlength=n)
     referenced = np.bincount(f[finite].ravel(), minlength=n) > 0
+    if rows is not None:                 # the other vertices' faces are not all there
+        area[~wanted] = 0.0
+        referenced &= wanted
     largest = area.max(initial=0.0)
     if not largest > 0.0:
-        return np.ones(n)
+        return _only(np.ones(n), rows)
     weights = area / largest
     weights[~referenced] = np.median(weights[referenced])
-    return weights
+    return _only(weights, rows)
 
 
-def cloud_area_weights(points):
+def _only(weights, rows):
+    """``weights`` (n,) at ``rows`` (None: all), NaN elsewhere."""
+    if rows is None:
+        return weights
+    out = np.full(len(weights), np.nan)
+    out[rows] = weights[rows]
+    return out
+
+
+def cloud_area_weights(points, rows=None):
     """Each cloud point's area weight (n,) in [0, 1]: the squared distance to its
     :data:`CLOUD_RING_POINTS`-th nearest distinct point, over the largest such square
     (on coordinates scaled by the power of two that keeps the squares finite: the same bits
     at any power-of-two scale; the farthest where a point has fewer others). Non-finite
     points and points with no other get the median of the others' (1 where there are
-    none)."""
+    none). ``rows`` (k,) int, optional: only these points' weights, over the largest among
+    them (the others NaN; a common factor, which the MLS fits ignore)."""
     p = np.asarray(points, dtype=np.float64)
     weights = np.full(len(p), np.nan)
     finite = np.flatnonzero(np.isfinite(p).all(axis=1))
-    if len(finite) > 1:
+    asked = finite
+    if rows is not None:
+        wanted = np.zeros(len(p), dtype=bool)
+        wanted[rows] = True
+        asked = finite[wanted[finite]]
+    if len(finite) > 1 and len(asked):
         q = p[finite]
         with np.errstate(over="ignore", invalid="ignore"):
             # the extent about the median; the coordinates' own size where that overflows
             extent = np.max(np.abs(q - np.median(q, axis=0)))
             if not np.isfinite(extent):
                 extent = np.max(np.abs(q))
-        q = q * power_of_two_scale(extent)
-        area = nearest_areas(q, q, np.inf, CLOUD_RING_POINTS, workers=-1)
+        unit = power_of_two_scale(extent)
+        area = nearest_areas(q * unit, p[asked] * unit, np.inf, CLOUD_RING_POINTS, workers=-1)
         largest = area.max(initial=0.0)
         if largest > 0.0:
-            weights[finite] = area / largest
+            weights[asked] = area / largest
     known = weights[np.isfinite(weights) & (weights > 0.0)]
-    return np.where(np.isfinite(weights) & (weights > 0.0), weights,
-                    np.median(known) if len(known) else 1.0)
+    return _only(np.where(np.isfinite(weights) & (weights > 0.0), weights,
+                          np.median(known) if len(known) else 1.0), rows)

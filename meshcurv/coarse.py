@@ -194,25 +194,32 @@ def estimate(v, f, radii, query, circle_fits, use_kring=True, coarse=True, probe
     n = len(v)
     if n == 0:                      # nothing to probe or blend
         return circle_fits(np.arange(0))
-    area = None
-    if area_weights:
-        area = vertex_area_weights(v, f) if f is not None else cloud_area_weights(v)
+
+    def areas(rows=None):
+        if not area_weights:
+            return None
+        return vertex_area_weights(v, f, rows) if f is not None else \
+            cloud_area_weights(v, rows)
+
     whole = query is None or (len(query) == n and np.array_equal(query, np.arange(n)))
     # one edge adjacency serves every radius's k-rings and the rings' noise
     adjacency = edge_adjacency(f, n) if f is not None and use_kring else None
     scales = [_supports(v, f, r, use_kring, not coarse, adjacency) for r in radii]
     probe = _sample_queries(n, PROBE_ROWS)
     blended = [True] * len(radii) if coarse else None
-    if blended is None and not (whole and probe_fits is None):
+    if blended is None:
+        # the probe reads the area weights of its rows' lists alone
         near = np.unique(np.concatenate([probe] + [scale.probe_search(probe)[1]
                                                    for scale in scales]))
-        blended = [_limited(base, near, probe, scale, area)
+        probe_area = areas(near)
+    if blended is None and not (whole and probe_fits is None):
+        blended = [_limited(base, near, probe, scale, probe_area)
                    for base, scale in zip((probe_fits or circle_fits)(near), scales)]
     if whole:
         fitted = np.arange(n)
         bases = circle_fits(fitted)
         if blended is None:
-            blended = [_limited(base, fitted, probe, scale, area)
+            blended = [_limited(base, fitted, probe, scale, probe_area)
                        for base, scale in zip(bases, scales)]
         chains = [[fitted] * (1 + PASSES * blend) for blend in blended]
     else:
@@ -221,8 +228,9 @@ def estimate(v, f, radii, query, circle_fits, use_kring=True, coarse=True, probe
                   for blend, scale in zip(blended, scales)]
         fitted = np.unique(np.concatenate([chain[0] for chain in chains]))
         bases = circle_fits(fitted)
-    ring = _ring(scales[0], f, adjacency) if f is not None and any(len(c) > 1 for c in chains) \
-        else None
+    passes = any(len(c) > 1 for c in chains)
+    ring = _ring(scales[0], f, adjacency) if f is not None and passes else None
+    area = areas() if passes else None
     return [_passes(base, fitted, chain, scale, ring, area)
             for base, chain, scale in zip(bases, chains, scales)]
 

@@ -55,6 +55,20 @@ def test_cloud_weights_are_the_squared_distance_to_the_sixth_nearest_distinct_po
         np.testing.assert_array_equal(cloud_area_weights(p * scale), w)
 
 
+
+def test_weights_of_some_rows_are_the_whole_weights_up_to_a_common_factor():
+    # the probe of the MLS blend reads the weights of a few rows' lists alone
+    rng = np.random.default_rng(3)
+    s = surfaces.torus(2.0, 0.5, 24, 12)
+    v = s.vertices + rng.normal(scale=0.02, size=s.vertices.shape)
+    rows = rng.choice(len(v), 40, replace=False)
+    for whole, part in ((vertex_area_weights(v, s.faces), vertex_area_weights(v, s.faces, rows)),
+                        (cloud_area_weights(v), cloud_area_weights(v, rows))):
+        assert np.isnan(np.delete(part, rows)).all()
+        factor = whole[rows].max() / part[rows].max()
+        assert 0.0 < factor <= 1.0      # the rows hold the largest or not
+        np.testing.assert_allclose(part[rows] * factor, whole[rows], rtol=1e-14)
+
 def _decimated_ellipsoid(keep=0.1):
     """The ellipsoid 2 / 1.5 / 1 (icosphere of 40962 vertices) decimated by MeshLab's quadric
     edge collapse to ``keep`` of its faces: denser where it bends more; the truth at each

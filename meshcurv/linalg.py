@@ -132,6 +132,14 @@ def solve_sym(m, rhs, npar, sol):
                 m[i, i] = math.sqrt(s)
             else:
                 m[i, j] = s / m[j, j]
+    solve_factored(m, rhs, npar, sol)
+    return True
+
+
+@njit(cache=True)
+def solve_factored(m, rhs, npar, sol):
+    """``sol`` = A^-1 ``rhs`` for the A whose Cholesky factor :func:`solve_sym` left in the
+    lower triangle of ``m[:npar, :npar]``: another right-hand side of the same system."""
     for i in range(npar):
         s = rhs[i]
         for k in range(i):
@@ -142,7 +150,6 @@ def solve_sym(m, rhs, npar, sol):
         for k in range(i + 1, npar):
             s -= m[k, i] * sol[k]
         sol[i] = s / m[i, i]
-    return True
 
 
 @njit(cache=True)

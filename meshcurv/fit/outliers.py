@@ -14,7 +14,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..linalg import (CHUNK, ball_offset, normal_frame, select_median,
-                      smallest_eigvec_jacobi3, solve_sym)
+                      smallest_eigvec_jacobi3, solve_factored, solve_sym)
 from .constants import (OUTLIER_ITERATIONS, OUTLIER_MAX_REJECTED, OUTLIER_SCALE_FLOOR,
                         OUTLIER_TRUSTED, TUKEY_C)
 from .jet import _add_monomials
@@ -439,12 +439,11 @@ def point_residuals(points, query_points, indptr, indices, radius, residual, sca
             s = max(_biweight_scale(res, k, mad) * coefficients, OUTLIER_SCALE_FLOOR)
             # x's own noise adds to the fit's error at x: variance s^2 (1 + e^T A^-1 B A^-1 e)
             # with A, B the moments of the weights and of their squares, e the constant term
+            # (A's factor is the last round's, in mat)
             fitted = sol[2]
-            _normal_equations(mom, hmom, p, mat, rhs)
             for a in range(p):
                 rhs[a] = 1.0 if a == 2 else 0.0
-            if not solve_sym(mat, rhs, p, sol):
-                continue
+            solve_factored(mat, rhs, p, sol)
             # e^T A^-1 B A^-1 e = sum_i (w_i x_i . A^-1 e)^2, x_i the model's terms at point i
             spread = 0.0
             for i in range(k):

@@ -10,7 +10,7 @@ from scipy.spatial import Delaunay
 import meshcurv
 from meshcurv import coarse, surfaces
 from meshcurv.normals import face_vertex_normals
-from meshcurv.ring_noise import ring_noise
+from meshcurv.ring_noise import _pairwise_sum, ring_noise, ring_noise_sparse
 
 
 def _dense_ring_noise(v, f):
@@ -44,6 +44,27 @@ def test_matches_its_dense_definition():
     assert np.allclose(noise, want_noise, rtol=1e-12, atol=0)
     assert np.allclose(edge, want_edge, rtol=1e-12, atol=0)
 
+
+
+def test_kernels_give_the_sparse_products_bits():
+    # the compiled rows of (I - P)^2 and P^2 sum in scipy.sparse's order: the same bits,
+    # NaN's included, on a noisy icosphere with a vertex in no face, faces repeated the other
+    # way round, a degenerate face, and a vertex of degree 40 (rows of (I - P)^2 above 128)
+    rng = np.random.default_rng(2)
+    ico = trimesh.creation.icosphere(3)
+    v = np.vstack([ico.vertices + 0.01 * rng.normal(size=ico.vertices.shape), [[5, 5, 5]]])
+    fan = np.array([[0, i, i + 1] for i in range(100, 140)])
+    f = np.vstack([ico.faces, ico.faces[:50, ::-1], [[0, 0, 1]], fan])
+    for faces in (ico.faces, f):
+        for got, want in zip(ring_noise(v, faces), ring_noise_sparse(v, faces)):
+            np.testing.assert_array_equal(got.view(np.int64), want.view(np.int64))
+
+
+def test_pairwise_sum_is_numpys():
+    rng = np.random.default_rng(3)
+    for n in list(range(1, 140)) + [257, 1031, 4099]:
+        a = rng.normal(size=n + 1) * 10.0 ** rng.integers(-6, 6, size=n + 1)
+        assert a[0] + _pairwise_sum(a, 1, n) == np.add.reduceat(a, [0])[0]
 
 @pytest.mark.parametrize("torus", [(3.0, 1.0, 32, 12), (1.0, 0.3, 64, 16), (2.0, 0.5, 200, 50)])
 def test_measures_gaussian_noise_along_the_normals(torus):

@@ -12,7 +12,10 @@ gave. A cloud point's area is the square of its one ring's reach, the distance t
 :data:`CLOUD_RING_POINTS`-th nearest distinct point.
 """
 
+import math
+
 import numpy as np
+from numba import njit
 
 from .neighbors import power_of_two_scale
 from .normals.orient import nearest_areas
@@ -56,27 +59,13 @@ def vertex_area_weights(vertices, faces, rows=None):
         wanted[rows] = True
         faces = faces[wanted[faces].any(axis=1)] if len(faces) else faces
     # each triangle once, its corners in ascending order: the same cross product however
-    # the face was wound, rotated or repeated
+    # the face was wound, rotated or repeated (repeats lie together in lexicographic order)
     f = np.sort(faces, axis=1)
-    f = f[np.lexsort(f.T[::-1])]
-    f = f[np.r_[True, (f[1:] != f[:-1]).any(axis=1)]] if len(f) else f
+    order = np.lexsort(f.T[::-1])
     if len(f) == 0:
         return _only(np.ones(n), rows)
-    with np.errstate(invalid="ignore", over="ignore"):
-        a = v[f[:, 1]] - v[f[:, 0]]
-        b = v[f[:, 2]] - v[f[:, 0]]
-        unit = power_of_two_scale(max(np.nanmax(np.abs(a), initial=0.0),
-                                      np.nanmax(np.abs(b), initial=0.0)))
-        if unit != 1.0:
-            a *= unit
-            b *= unit
-        # twice the area: the length of the edges' cross product
-        twice = np.sqrt((a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]) ** 2
-                        + (a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]) ** 2
-                        + (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]) ** 2)
-    finite = np.isfinite(twice)
-    area = np.bincount(f[finite].ravel(), weights=np.repeat(twice[finite], 3), minlength=n)
-    referenced = np.bincount(f[finite].ravel(), minlength=n) > 0
+    unit = power_of_two_scale(_edge_extent(v, f, order))
+    area, referenced = _corner_areas(v, f, order, unit)
     if rows is not None:                 # the other vertices' faces are not all there
         area[~wanted] = 0.0
         referenced &= wanted
@@ -86,6 +75,68 @@ def vertex_area_weights(vertices, faces, rows=None):
     weights = area / largest
     weights[~referenced] = np.median(weights[referenced])
     return _only(weights, rows)
+
+
+@njit(cache=True)
+def _repeats(f, order, t):
+    """Whether face ``f[order[t]]`` (corners sorted) is the one before it in ``order``."""
+    if t == 0:
+        return False
+    i, j = order[t], order[t - 1]
+    return f[i, 0] == f[j, 0] and f[i, 1] == f[j, 1] and f[i, 2] == f[j, 2]
+
+
+@njit(cache=True)
+def _edge_extent(v, f, order):
+    """The largest |coordinate| of the edges (corner 1 - corner 0, corner 2 - corner 0) of
+    the distinct faces ``f[order]`` (corners sorted, repeats adjacent); NaN's passed over, 0
+    for none."""
+    big = 0.0
+    for t in range(len(order)):
+        if _repeats(f, order, t):
+            continue
+        i = order[t]
+        for c in range(3):
+            x = abs(v[f[i, 1], c] - v[f[i, 0], c])
+            y = abs(v[f[i, 2], c] - v[f[i, 0], c])
+            if x > big:
+                big = x
+            if y > big:
+                big = y
+    return big
+
+
+@njit(cache=True)
+def _corner_areas(v, f, order, unit):
+    """``(area, referenced)``, (n,) each: twice the area of each distinct face ``f[order]``
+    (its edges scaled by ``unit``) summed at its corners in that order, and whether a vertex
+    is a corner of a face of finite area."""
+    n = v.shape[0]
+    area = np.zeros(n)
+    referenced = np.zeros(n, dtype=np.bool_)
+    for t in range(len(order)):
+        if _repeats(f, order, t):
+            continue
+        i = order[t]
+        p, q, r = f[i, 0], f[i, 1], f[i, 2]
+        a0 = v[q, 0] - v[p, 0]
+        a1 = v[q, 1] - v[p, 1]
+        a2 = v[q, 2] - v[p, 2]
+        b0 = v[r, 0] - v[p, 0]
+        b1 = v[r, 1] - v[p, 1]
+        b2 = v[r, 2] - v[p, 2]
+        if unit != 1.0:
+            a0, a1, a2 = a0 * unit, a1 * unit, a2 * unit
+            b0, b1, b2 = b0 * unit, b1 * unit, b2 * unit
+        c0 = a1 * b2 - a2 * b1
+        c1 = a2 * b0 - a0 * b2
+        c2 = a0 * b1 - a1 * b0
+        twice = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+        if np.isfinite(twice):
+            for k in range(3):
+                area[f[i, k]] += twice
+                referenced[f[i, k]] = True
+    return area, referenced
 
 
 def _only(weights, rows):

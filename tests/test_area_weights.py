@@ -33,6 +33,20 @@ def test_weights_are_the_same_bits_however_the_faces_are_wound_repeated_or_scale
         np.testing.assert_array_equal(vertex_area_weights(v, f), w)
 
 
+
+def test_weights_match_plain_numpy_areas():
+    # the compiled kernels against np.cross and np.add.at over the distinct triangles
+    rng = np.random.default_rng(5)
+    s = surfaces.torus(2.0, 0.5, 30, 12)
+    v = s.vertices + rng.normal(scale=0.05, size=s.vertices.shape)
+    f = np.vstack([s.faces, s.faces[rng.choice(len(s.faces), 40)][:, ::-1]])
+    distinct = np.unique(np.sort(f, axis=1), axis=0)
+    twice = np.linalg.norm(np.cross(v[distinct[:, 1]] - v[distinct[:, 0]],
+                                    v[distinct[:, 2]] - v[distinct[:, 0]]), axis=1)
+    area = np.zeros(len(v))
+    np.add.at(area, distinct.ravel(), np.repeat(twice, 3))
+    np.testing.assert_allclose(vertex_area_weights(v, f), area / area.max(), rtol=1e-13)
+
 def test_weights_without_any_area_are_one():
     v = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0]], dtype=float)
     np.testing.assert_array_equal(vertex_area_weights(v, np.array([[0, 1, 2]])), 1.0)

@@ -92,3 +92,20 @@ def test_noisy_meshes_keep_the_plane_fits():
     w = pipeline.face_weights(torus.vertices, torus.faces,
                               face_vertex_normals(torus.vertices, torus.faces))
     assert np.quantile(w, 0.05) >= 0.99
+
+
+def test_face_vertex_normals_are_the_numpy_specifications_bits():
+    # a noisy icosphere with faces repeated the other way round, a degenerate face, a
+    # vertex in no face and a face through a NaN vertex; and one whose squares overflow
+    from meshcurv.normals.faces import face_vertex_normals_numpy
+
+    s = surfaces.sphere(1.0, 2)
+    rng = np.random.default_rng(4)
+    v = np.vstack([s.vertices + 0.01 * rng.normal(size=s.vertices.shape), [[5, 5, 5]],
+                   [[np.nan, 0, 0]]])
+    n = len(s.vertices)
+    f = np.vstack([s.faces, s.faces[:9, ::-1], [[0, 0, 1]], [[n + 1, 1, 2]]])
+    with np.errstate(all="ignore"):
+        for vv, ff in ((v, f), (s.vertices * 1e200, s.faces), (v, f[:0])):
+            got, want = face_vertex_normals(vv, ff), face_vertex_normals_numpy(vv, ff)
+            np.testing.assert_array_equal(got.view(np.int64), want.view(np.int64))

@@ -9,7 +9,7 @@ from numba import njit, prange
 
 from ..neighbors.kring import edge_adjacency
 
-__all__ = ["face_vertex_normals", "face_normal_error", "unit_rows"]
+__all__ = ["face_vertex_normals", "face_vertex_normals_numpy", "face_normal_error", "unit_rows"]
 
 # Standard deviation of the difference of two neighbors' umbrella heights per unit of
 # Gaussian noise along the normals, on a regular triangulation (6 neighbors, 2 shared by
@@ -36,8 +36,19 @@ def face_vertex_normals(vertices, faces):
 
     Returns
     -------
-    (n, 3) float64 unit normals; NaN for vertices in no (non-degenerate, finite) face.
+    (n, 3) float64 unit normals; NaN for vertices in no (non-degenerate, finite) face. The
+    same bits as :func:`face_vertex_normals_numpy` (the specification), without its
+    per-face arrays.
     """
+    v = np.ascontiguousarray(vertices, dtype=np.float64)
+    f = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+    return _face_vertex_normals(v, f)
+
+
+def face_vertex_normals_numpy(vertices, faces):
+    """:func:`face_vertex_normals` in numpy: each face's edges' cross product (twice its
+    area times its unit normal; 0 where not finite) summed at its corners by
+    ``np.bincount``, then scaled to unit length (:func:`unit_rows`)."""
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     n = len(v)
@@ -50,6 +61,41 @@ def face_vertex_normals(vertices, faces):
         np.bincount(f.ravel(), weights=np.repeat(fn[:, c], 3), minlength=n) for c in range(3)
     ])
     return unit_rows(acc)
+
+
+@njit(cache=True)
+def _face_vertex_normals(v, f):
+    """:func:`face_vertex_normals`' kernel: the sums in bincount's order (face by face, its
+    corners in order), the cross product and the norm as numpy forms them."""
+    n = v.shape[0]
+    acc = np.zeros((n, 3))
+    for i in range(f.shape[0]):
+        a, b, c = f[i, 0], f[i, 1], f[i, 2]
+        a0 = v[b, 0] - v[a, 0]
+        a1 = v[b, 1] - v[a, 1]
+        a2 = v[b, 2] - v[a, 2]
+        b0 = v[c, 0] - v[a, 0]
+        b1 = v[c, 1] - v[a, 1]
+        b2 = v[c, 2] - v[a, 2]
+        c0 = a1 * b2 - a2 * b1
+        c1 = a2 * b0 - a0 * b2
+        c2 = a0 * b1 - a1 * b0
+        if not (np.isfinite(c0) and np.isfinite(c1) and np.isfinite(c2)):
+            c0 = c1 = c2 = 0.0
+        for k in range(3):
+            corner = f[i, k]
+            acc[corner, 0] += c0
+            acc[corner, 1] += c1
+            acc[corner, 2] += c2
+    for i in range(n):
+        norm = math.sqrt(acc[i, 0] * acc[i, 0] + acc[i, 1] * acc[i, 1] + acc[i, 2] * acc[i, 2])
+        if np.isfinite(norm) and norm > 0.0:
+            for k in range(3):
+                acc[i, k] = acc[i, k] / norm
+        else:
+            for k in range(3):
+                acc[i, k] = np.nan
+    return acc
 
 
 def face_normal_error(vertices, faces, normals, adjacency=None):

@@ -45,7 +45,7 @@ from .neighbors.csr import thread_ranges
 from .normals import face_vertex_normals
 from .normals.winding import coherent_faces
 
-__all__ = ["ring_noise", "ring_noise_sparse", "mean_edges", "two_ring_sums"]
+__all__ = ["ring_noise", "ring_noise_sparse", "mean_edges", "ring_means", "two_ring_sums"]
 
 
 def ring_noise(v, f, adjacency=None):
@@ -57,23 +57,25 @@ def ring_noise(v, f, adjacency=None):
     winding, and faces listed twice, do not matter. ``adjacency``: the mesh's
     :func:`meshcurv.neighbors.edge_adjacency`, if already made. The same bits as
     :func:`ring_noise_sparse`."""
-    v = np.asarray(v, dtype=np.float64)
+    v = np.ascontiguousarray(v, dtype=np.float64)
     n = len(v)
     indptr, indices = edge_adjacency(f, n) if adjacency is None else adjacency
     counts = np.diff(indptr)
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
         edge = mean_edges(v, indptr, indices)
-        ring_mean = sp.csr_matrix((np.repeat(1.0 / counts, counts), indices, indptr),
-                                  shape=(n, n))
-        height, residual = _residuals(v, f, ring_mean, indptr, indices, counts)
-        spread, per_unit = two_ring_sums(indptr, indices, ring_mean.data, residual * residual)
+        inverse = 1.0 / counts
+
+        def ring_mean(x):
+            return ring_means(indptr, indices, inverse, x)
+        residual = _residual(v, f, ring_mean, indptr, indices, counts)
+        spread, per_unit = two_ring_sums(indptr, indices, inverse, residual * residual)
         noise = np.sqrt(spread / per_unit)
     return noise, edge
 
 
 def ring_noise_sparse(v, f, adjacency=None):
-    """:func:`ring_noise` with scipy.sparse's matrix products (the specification of its
-    kernels; ~7x the memory)."""
+    """:func:`ring_noise` with scipy.sparse's matrices (the specification of its kernels;
+    ~7x the memory)."""
     v = np.asarray(v, dtype=np.float64)
     n = len(v)
     indptr, indices = edge_adjacency(f, n) if adjacency is None else adjacency
@@ -82,7 +84,7 @@ def ring_noise_sparse(v, f, adjacency=None):
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
         edge = np.bincount(rows, np.linalg.norm(v[rows] - v[indices], axis=1), n) / counts
         ring_mean = sp.csr_matrix((1.0 / counts[rows], indices, indptr), shape=(n, n))
-        height, residual = _residuals(v, f, ring_mean, indptr, indices, counts)
+        residual = _residual(v, f, ring_mean.__matmul__, indptr, indices, counts)
         second = sp.identity(n, format="csr") - ring_mean
         second = second @ second
         per_unit = np.asarray(second.multiply(second).sum(axis=1)).ravel()
@@ -91,12 +93,13 @@ def ring_noise_sparse(v, f, adjacency=None):
     return noise, edge
 
 
-def _residuals(v, f, ring_mean, indptr, indices, counts):
-    """``(h, r)``: the umbrella heights h along the normals and ``r = (I - P) h``."""
+def _residual(v, f, ring_mean, indptr, indices, counts):
+    """``r = (I - P) h`` (n,) of the umbrella heights h along the normals; ``ring_mean(x)``
+    is ``P x``."""
     normal = face_vertex_normals(v, coherent_faces(v, f, (indptr, indices))[0])
     normal[counts == 0] = np.nan
-    height = np.einsum("ij,ij->i", ring_mean @ v - v, normal)
-    return height, height - ring_mean @ height
+    height = np.einsum("ij,ij->i", ring_mean(v) - v, normal)
+    return height - ring_mean(height)
 
 
 @njit(cache=True, error_model="numpy")
@@ -119,23 +122,47 @@ def mean_edges(v, indptr, indices):
 
 
 @njit(cache=True)
-def _product_row(ap, aj, ax, bp, bj, bx, i, sums, following, columns, values):
-    """Row ``i`` of the CSR product A B as scipy's ``csr_matmat`` forms it: its nonzero
-    entries into ``columns``, ``values`` in that order (the columns in reverse order of first
-    appearance; each sum over A's row in its order, from 0); returns their count. ``sums``
-    (n,) 0 and ``following`` (n,) -1 on entry, and again on return."""
-    head = -2
-    length = 0
-    for jj in range(ap[i], ap[i + 1]):
-        j = aj[jj]
-        a = ax[jj]
-        for kk in range(bp[j], bp[j + 1]):
-            k = bj[kk]
-            sums[k] += a * bx[kk]
-            if following[k] == -1:
-                following[k] = head
-                head = k
-                length += 1
+def ring_means(indptr, indices, inverse, x):
+    """``P x`` for ``x`` (n,) or (n, k): each row's mean over its neighbours (CSR adjacency;
+    ``inverse`` (n,) one over each row's count), summed from 0 in the row's order, as
+    scipy.sparse's ``csr_matvec(s)`` does."""
+    out = np.zeros(x.shape)
+    flat = out.reshape(x.shape[0], -1)
+    values = x.reshape(x.shape[0], -1)
+    for i in range(len(indptr) - 1):
+        w = inverse[i]
+        for e in range(indptr[i], indptr[i + 1]):
+            j = indices[e]
+            for c in range(flat.shape[1]):
+                flat[i, c] += w * values[j, c]
+    return out
+
+
+@njit(cache=True)
+def _second_entry(indptr, indices, inverse, r, t, before):
+    """Entry ``t`` (column, value) of row ``r`` of ``I - P`` as scipy.sparse's difference of
+    two canonical matrices lists it: the row's columns in order, 1 on the diagonal (after the
+    ``before`` neighbours of lower index), ``0 - 1 / count`` elsewhere."""
+    if t == before:
+        return r, 1.0
+    e = indptr[r] + (t if t < before else t - 1)
+    return indices[e], 0.0 - inverse[r]
+
+
+@njit(cache=True)
+def _lower(indptr, indices, r):
+    """How many of row ``r``'s neighbours have a lower index."""
+    count = 0
+    for e in range(indptr[r], indptr[r + 1]):
+        count += indices[e] < r
+    return count
+
+
+@njit(cache=True)
+def _drain(head, length, sums, following, columns, values):
+    """The entries of a product row as scipy's ``csr_matmat`` stores them: the columns
+    linked from ``head`` (the last one first seen), those with a nonzero sum, into
+    ``columns``, ``values``; ``sums`` and ``following`` reset; returns their count."""
     count = 0
     for _ in range(length):
         if sums[head] != 0.0:
@@ -147,6 +174,45 @@ def _product_row(ap, aj, ax, bp, bj, bx, i, sums, following, columns, values):
         following[last] = -1
         sums[last] = 0.0
     return count
+
+
+@njit(cache=True)
+def _second_row(indptr, indices, inverse, i, sums, following, columns, values):
+    """Row ``i`` of ``(I - P)^2`` as scipy's ``csr_matmat`` forms it (each sum over the
+    row of ``I - P`` in its order, from 0): its count of entries, into ``columns``,
+    ``values`` (:func:`_drain`). ``sums`` (n,) 0 and ``following`` (n,) -1, as left."""
+    head = -2
+    length = 0
+    before_i = _lower(indptr, indices, i)
+    for t in range(indptr[i + 1] - indptr[i] + 1):
+        j, a = _second_entry(indptr, indices, inverse, i, t, before_i)
+        before_j = _lower(indptr, indices, j)
+        for u in range(indptr[j + 1] - indptr[j] + 1):
+            k, b = _second_entry(indptr, indices, inverse, j, u, before_j)
+            sums[k] += a * b
+            if following[k] == -1:
+                following[k] = head
+                head = k
+                length += 1
+    return _drain(head, length, sums, following, columns, values)
+
+
+@njit(cache=True)
+def _two_ring_row(indptr, indices, inverse, i, sums, following, columns, values):
+    """Row ``i`` of ``P^2`` as scipy's ``csr_matmat`` forms it (see :func:`_second_row`)."""
+    head = -2
+    length = 0
+    for jj in range(indptr[i], indptr[i + 1]):
+        j = indices[jj]
+        a = inverse[i]
+        for kk in range(indptr[j], indptr[j + 1]):
+            k = indices[kk]
+            sums[k] += a * inverse[j]
+            if following[k] == -1:
+                following[k] = head
+                head = k
+                length += 1
+    return _drain(head, length, sums, following, columns, values)
 
 
 @njit(cache=True)
@@ -216,8 +282,8 @@ def _pairwise_sum(a, lo, n):
 
 @njit(cache=True)
 def _row_bound(indptr, indices):
-    """Most entries a row of P^2 or (I - P)^2 can hold: the longest sum of the degrees of a
-    row's vertex and its neighbors."""
+    """Most entries a row of P^2 or (I - P)^2 can hold: the largest sum over a vertex and
+    its neighbours of their counts plus one."""
     most = 1
     for i in range(len(indptr) - 1):
         total = indptr[i + 1] - indptr[i] + 1
@@ -229,14 +295,14 @@ def _row_bound(indptr, indices):
 
 
 @njit(parallel=True, cache=True)
-def _per_unit(sp_, sj, sx, n, nthreads):
-    """``c_i``, the squared entries of row i of ``(I - P)^2`` summed (``S = I - P`` in CSR
-    ``sp_, sj, sx``) as ``S @ S`` then ``.multiply`` and ``.sum(axis=1)`` of scipy.sparse
-    do: the products in reverse order of the product's row, the first plus numpy's pairwise
-    sum of the others; 0 for an empty row."""
+def _per_unit(indptr, indices, inverse, nthreads):
+    """``c_i``, the squared entries of row i of ``(I - P)^2`` summed as scipy.sparse's
+    ``.multiply`` and ``.sum(axis=1)`` do: the products in reverse order of the row, the
+    first plus numpy's pairwise sum of the others; 0 for an empty row."""
+    n = len(indptr) - 1
     out = np.zeros(n)
     threads, per = thread_ranges(n, nthreads)
-    most = _row_bound(sp_, sj)
+    most = _row_bound(indptr, indices)
     for t in prange(threads):
         sums = np.zeros(n)
         following = np.full(n, -1, dtype=np.int64)
@@ -244,8 +310,7 @@ def _per_unit(sp_, sj, sx, n, nthreads):
         values = np.empty(most)
         squares = np.empty(most)
         for i in range(t * per, min(n, (t + 1) * per)):
-            count = _product_row(sp_, sj, sx, sp_, sj, sx, i, sums, following, columns,
-                                 values)
+            count = _second_row(indptr, indices, inverse, i, sums, following, columns, values)
             kept = 0
             for c in range(count - 1, -1, -1):
                 square = values[c] * values[c]
@@ -258,10 +323,9 @@ def _per_unit(sp_, sj, sx, n, nthreads):
 
 
 @njit(parallel=True, cache=True)
-def _two_ring_means(indptr, indices, weights, x, y, nthreads):
-    """``(P^2 x, P^2 y)`` with ``P`` the CSR ``indptr, indices, weights``, each row of
-    ``P @ P`` formed as scipy's ``csr_matmat`` does and then applied in its order (scipy's
-    ``csr_matvec``: from 0, in the row's order)."""
+def _two_ring_means(indptr, indices, inverse, x, y, nthreads):
+    """``(P^2 x, P^2 y)``: each row of ``P @ P`` formed as scipy's ``csr_matmat`` does and
+    applied in its order from 0 (scipy's ``csr_matvec``)."""
     n = len(indptr) - 1
     px = np.zeros(n)
     py = np.zeros(n)
@@ -273,8 +337,8 @@ def _two_ring_means(indptr, indices, weights, x, y, nthreads):
         columns = np.empty(most, dtype=np.int64)
         values = np.empty(most)
         for i in range(t * per, min(n, (t + 1) * per)):
-            count = _product_row(indptr, indices, weights, indptr, indices, weights, i, sums,
-                                 following, columns, values)
+            count = _two_ring_row(indptr, indices, inverse, i, sums, following, columns,
+                                  values)
             sx = 0.0
             sy = 0.0
             for c in range(count):
@@ -285,14 +349,12 @@ def _two_ring_means(indptr, indices, weights, x, y, nthreads):
     return px, py
 
 
-def two_ring_sums(indptr, indices, weights, squares):
+def two_ring_sums(indptr, indices, inverse, squares):
     """``(P^2 squares, P^2 c)``, (n,) each: the 2-ring means of ``squares`` (n,) and of the
     variance factors ``c_i = sum_j ((I - P)^2)_ij^2``, with ``P`` the ring mean (CSR
-    ``indptr, indices, weights``, rows sorted); the same bits as scipy.sparse's products
-    (:func:`ring_noise_sparse`)."""
-    n = len(indptr) - 1
-    second = sp.identity(n, format="csr") - sp.csr_matrix((weights, indices, indptr),
-                                                          shape=(n, n))
+    adjacency ``indptr, indices``, rows sorted; ``inverse`` (n,) one over each row's
+    count); the same bits as scipy.sparse's products (:func:`ring_noise_sparse`), a row at a
+    time."""
     threads = numba.get_num_threads()
-    per_unit = _per_unit(second.indptr, second.indices, second.data, n, threads)
-    return _two_ring_means(indptr, indices, weights, squares, per_unit, threads)
+    per_unit = _per_unit(indptr, indices, inverse, threads)
+    return _two_ring_means(indptr, indices, inverse, squares, per_unit, threads)

@@ -12,8 +12,6 @@ otherwise cancel or double its face normal and join nothing in the winding."""
 
 import numpy as np
 from numba import njit
-from scipy import sparse
-from scipy.sparse.csgraph import connected_components
 
 from ..neighbors.kring import edge_adjacency
 
@@ -101,6 +99,33 @@ def _propagate_turns(indptr, indices, clash, n_faces):
     return turn, piece
 
 
+@njit(cache=True)
+def _vertex_pieces(indptr, indices, n):
+    """``(n_pieces, piece)``: the connected pieces of the graph (CSR ``indptr, indices``
+    over ``n`` vertices) and each vertex's, numbered in the order of their lowest vertex."""
+    piece = np.full(n, -1, dtype=np.int64)
+    queue = np.empty(n, dtype=np.int64)
+    n_pieces = 0
+    for start in range(n):
+        if piece[start] >= 0:
+            continue
+        piece[start] = n_pieces
+        head = 0
+        tail = 1
+        queue[0] = start
+        while head < tail:
+            a = queue[head]
+            head += 1
+            for e in range(indptr[a], indptr[a + 1]):
+                b = indices[e]
+                if piece[b] < 0:
+                    piece[b] = n_pieces
+                    queue[tail] = b
+                    tail += 1
+        n_pieces += 1
+    return n_pieces, piece
+
+
 def coherent_faces(vertices, faces, adjacency=None):
     """``(faces, n_turned, n_repeated)``: ``faces`` ((m', 3) int64) with the rows that were
     wound against their neighbours, or inward on a closed piece, reversed, and how many;
@@ -175,9 +200,7 @@ def _outward_closed_pieces(v, faces, indptr, indices, counts):
     - wound inward, e.g. after a mirroring - turned; ``faces`` itself where there is none."""
     f = np.asarray(faces, dtype=np.int64)
     n = len(v)
-    n_pieces, vertex_piece = connected_components(
-        sparse.csr_matrix((np.ones(len(indices), dtype=np.int8), indices, indptr), shape=(n, n)),
-        directed=False)
+    n_pieces, vertex_piece = _vertex_pieces(indptr, indices, n)
     border = np.zeros(n_pieces, dtype=bool)
     one_way = np.flatnonzero(counts == 0)          # entries of border edges: their rows
     border[vertex_piece[np.searchsorted(indptr, one_way, side="right") - 1]] = True

@@ -18,6 +18,7 @@ import numpy as np
 from numba import njit
 
 from .neighbors import power_of_two_scale
+from .normals.faces import edge_cross
 from .normals.orient import nearest_areas
 
 __all__ = ["vertex_area_weights", "cloud_area_weights", "CLOUD_RING_POINTS"]
@@ -118,19 +119,7 @@ def _corner_areas(v, f, order, unit):
         if _repeats(f, order, t):
             continue
         i = order[t]
-        p, q, r = f[i, 0], f[i, 1], f[i, 2]
-        a0 = v[q, 0] - v[p, 0]
-        a1 = v[q, 1] - v[p, 1]
-        a2 = v[q, 2] - v[p, 2]
-        b0 = v[r, 0] - v[p, 0]
-        b1 = v[r, 1] - v[p, 1]
-        b2 = v[r, 2] - v[p, 2]
-        if unit != 1.0:
-            a0, a1, a2 = a0 * unit, a1 * unit, a2 * unit
-            b0, b1, b2 = b0 * unit, b1 * unit, b2 * unit
-        c0 = a1 * b2 - a2 * b1
-        c1 = a2 * b0 - a0 * b2
-        c2 = a0 * b1 - a1 * b0
+        c0, c1, c2 = edge_cross(v, f[i, 0], f[i, 1], f[i, 2], unit)
         twice = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
         if np.isfinite(twice):
             for k in range(3):

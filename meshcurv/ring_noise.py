@@ -159,6 +159,17 @@ def _lower(indptr, indices, r):
 
 
 @njit(cache=True)
+def _add(sums, following, k, value, head, length):
+    """``sums[k] += value``, and column k linked in front of ``head`` where it is new (as
+    scipy's ``csr_matmat`` does); returns the list's ``(head, length)``."""
+    sums[k] += value
+    if following[k] == -1:
+        following[k] = head
+        return k, length + 1
+    return head, length
+
+
+@njit(cache=True)
 def _drain(head, length, sums, following, columns, values):
     """The entries of a product row as scipy's ``csr_matmat`` stores them: the columns
     linked from ``head`` (the last one first seen), those with a nonzero sum, into
@@ -189,11 +200,7 @@ def _second_row(indptr, indices, inverse, i, sums, following, columns, values):
         before_j = _lower(indptr, indices, j)
         for u in range(indptr[j + 1] - indptr[j] + 1):
             k, b = _second_entry(indptr, indices, inverse, j, u, before_j)
-            sums[k] += a * b
-            if following[k] == -1:
-                following[k] = head
-                head = k
-                length += 1
+            head, length = _add(sums, following, k, a * b, head, length)
     return _drain(head, length, sums, following, columns, values)
 
 
@@ -206,12 +213,7 @@ def _two_ring_row(indptr, indices, inverse, i, sums, following, columns, values)
         j = indices[jj]
         a = inverse[i]
         for kk in range(indptr[j], indptr[j + 1]):
-            k = indices[kk]
-            sums[k] += a * inverse[j]
-            if following[k] == -1:
-                following[k] = head
-                head = k
-                length += 1
+            head, length = _add(sums, following, indices[kk], a * inverse[j], head, length)
     return _drain(head, length, sums, following, columns, values)
 
 

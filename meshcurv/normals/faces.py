@@ -64,22 +64,29 @@ def face_vertex_normals_numpy(vertices, faces):
 
 
 @njit(cache=True)
+def edge_cross(v, p, q, r, unit):
+    """The cross product (3 floats) of the edges ``v[q] - v[p]`` and ``v[r] - v[p]`` of a
+    face (times ``unit``, unless 1), formed as ``np.cross`` forms it."""
+    a0 = v[q, 0] - v[p, 0]
+    a1 = v[q, 1] - v[p, 1]
+    a2 = v[q, 2] - v[p, 2]
+    b0 = v[r, 0] - v[p, 0]
+    b1 = v[r, 1] - v[p, 1]
+    b2 = v[r, 2] - v[p, 2]
+    if unit != 1.0:
+        a0, a1, a2 = a0 * unit, a1 * unit, a2 * unit
+        b0, b1, b2 = b0 * unit, b1 * unit, b2 * unit
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+
+
+@njit(cache=True)
 def _face_vertex_normals(v, f):
     """:func:`face_vertex_normals`' kernel: the sums in bincount's order (face by face, its
     corners in order), the cross product and the norm as numpy forms them."""
     n = v.shape[0]
     acc = np.zeros((n, 3))
     for i in range(f.shape[0]):
-        a, b, c = f[i, 0], f[i, 1], f[i, 2]
-        a0 = v[b, 0] - v[a, 0]
-        a1 = v[b, 1] - v[a, 1]
-        a2 = v[b, 2] - v[a, 2]
-        b0 = v[c, 0] - v[a, 0]
-        b1 = v[c, 1] - v[a, 1]
-        b2 = v[c, 2] - v[a, 2]
-        c0 = a1 * b2 - a2 * b1
-        c1 = a2 * b0 - a0 * b2
-        c2 = a0 * b1 - a1 * b0
+        c0, c1, c2 = edge_cross(v, f[i, 0], f[i, 1], f[i, 2], 1.0)
         if not (np.isfinite(c0) and np.isfinite(c1) and np.isfinite(c2)):
             c0 = c1 = c2 = 0.0
         for k in range(3):

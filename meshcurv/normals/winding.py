@@ -73,7 +73,8 @@ def _piece_volumes(vertices, faces, piece, n_pieces, origin):
 def _propagate_turns(indptr, indices, clash, n_faces):
     """Breadth-first over the faces joined by manifold edges: ``turn[g]`` (0/1) such that
     faces whose edge ``clash`` says they run the same way (1) end up opposite; returns
-    ``(turn, piece)``, the piece (connected component) of each face."""
+    ``(turn, piece)``, the piece (connected component) of each face, numbered in the order
+    of its lowest face. Any graph's pieces, with ``clash`` 0."""
     turn = np.zeros(n_faces, dtype=np.int8)
     piece = np.full(n_faces, -1, dtype=np.int64)
     queue = np.empty(n_faces, dtype=np.int64)
@@ -97,33 +98,6 @@ def _propagate_turns(indptr, indices, clash, n_faces):
                     tail += 1
         n_pieces += 1
     return turn, piece
-
-
-@njit(cache=True)
-def _vertex_pieces(indptr, indices, n):
-    """``(n_pieces, piece)``: the connected pieces of the graph (CSR ``indptr, indices``
-    over ``n`` vertices) and each vertex's, numbered in the order of their lowest vertex."""
-    piece = np.full(n, -1, dtype=np.int64)
-    queue = np.empty(n, dtype=np.int64)
-    n_pieces = 0
-    for start in range(n):
-        if piece[start] >= 0:
-            continue
-        piece[start] = n_pieces
-        head = 0
-        tail = 1
-        queue[0] = start
-        while head < tail:
-            a = queue[head]
-            head += 1
-            for e in range(indptr[a], indptr[a + 1]):
-                b = indices[e]
-                if piece[b] < 0:
-                    piece[b] = n_pieces
-                    queue[tail] = b
-                    tail += 1
-        n_pieces += 1
-    return n_pieces, piece
 
 
 def coherent_faces(vertices, faces, adjacency=None):
@@ -200,7 +174,9 @@ def _outward_closed_pieces(v, faces, indptr, indices, counts):
     - wound inward, e.g. after a mirroring - turned; ``faces`` itself where there is none."""
     f = np.asarray(faces, dtype=np.int64)
     n = len(v)
-    n_pieces, vertex_piece = _vertex_pieces(indptr, indices, n)
+    # the pieces of the vertices' graph: its breadth-first search with nothing to turn
+    vertex_piece = _propagate_turns(indptr, indices, np.zeros(len(indices), np.int8), n)[1]
+    n_pieces = int(vertex_piece.max(initial=-1)) + 1
     border = np.zeros(n_pieces, dtype=bool)
     one_way = np.flatnonzero(counts == 0)          # entries of border edges: their rows
     border[vertex_piece[np.searchsorted(indptr, one_way, side="right") - 1]] = True

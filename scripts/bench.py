@@ -378,8 +378,8 @@ def stage_times(v, f, normals, radius):
     Every public compiled kernel (meshcurv.neighbors, .normals, .fit) that no other kernel
     calls is wrapped with a timer for the duration of one call with the normals given and one
     with them estimated; the kernels are the leaves of the pipeline (neighbour search,
-    normals, orientation, circle fits, MLS surface), with the blend's ring noise (sparse
-    numpy), and what remains of the call's time is numpy and Python glue. Returns
+    normals, orientation, circle fits, MLS surface), with the blend's ring noise (one stage:
+    numpy and its own kernels), and what remains of the call's time is numpy and Python glue. Returns
     ``{mode: {stage: seconds}}``.
     """
     import meshcurv
@@ -403,7 +403,7 @@ def stage_times(v, f, normals, radius):
     # import name)
     originals.update({(holder, name): fn for (_, name), fn in list(originals.items())
                       for holder in (pipeline, coarse) if getattr(holder, name, None) is fn})
-    # and the MLS blend's noise over a mesh's rings (sparse numpy, not compiled)
+    # and the MLS blend's noise over a mesh's rings (numpy and its own kernels, as one stage)
     originals[(coarse, "ring_noise")] = coarse.ring_noise
 
     def timed(name, fn):

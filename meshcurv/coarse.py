@@ -469,6 +469,8 @@ def mls_rows(result, rows, v, normals, point_weights, h, search, unit=1.0, block
         with np.errstate(invalid="ignore"):
             judged = noise if rough_noise is None else rough_noise
             rough = np.where(judged >= ROUGH_NOISE * scale, judged, np.nan)
+        if not np.isfinite(rough).any():
+            rough = None                # no rough point: each row's own noise
     for lo in range(0, m, block):
         sl = slice(lo, min(m, lo + block))
         idx = rows[sl]
@@ -505,7 +507,7 @@ def support_noise(rows, v, noise, rough, h, lists, crease=None):
     of ``v``); NaN where the row's own is. ``lists``: CSR ``(indptr, indices)`` about the
     rows, holding every vertex within ``h`` (arguments as :func:`mls_rows`); ``crease``
     ((n,) bool): the rough points count only for rows whose support holds a crease vertex
-    (None: for every row).
+    (None: for every row); ``rough`` None: there is no rough point.
 
     The MLS surface of a row is smooth over its whole support: where that reaches a sharp
     edge (the local jet's residual there 0.03-0.05 of the radius, against 1e-4 on the faces
@@ -514,6 +516,8 @@ def support_noise(rows, v, noise, rough, h, lists, crease=None):
     trimesh's 256-section cylinder), its rows at least a radius from the edges, mean |dk|
     with each row's own noise: 0.50 at 1-1.5 radii from the edge, 0.12 at 1.5-2, 0.14 on
     the caps (the circle fits alone: 0.016 and 0)."""
+    if rough is None:
+        return noise[rows]
     top = np.empty(len(rows))
     ball_max(v, v[rows], *lists, h * h, rough, top)
     if crease is not None:

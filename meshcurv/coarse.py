@@ -202,6 +202,9 @@ def estimate(v, f, radii, query, circle_fits, use_kring=True, coarse=True, probe
             cloud_area_weights(v, rows)
 
     whole = query is None or (len(query) == n and np.array_equal(query, np.arange(n)))
+    # the circle fits first where the probe needs nothing before them: the MLS surface's
+    # searches (a cloud's grid: a copy of the points) are not held through them
+    bases = circle_fits(np.arange(n)) if whole and probe_fits is None else None
     # one edge adjacency serves every radius's k-rings and the rings' noise
     adjacency = edge_adjacency(f, n) if f is not None and use_kring else None
     scales = [_supports(v, f, r, use_kring, not coarse, adjacency) for r in radii]
@@ -217,7 +220,8 @@ def estimate(v, f, radii, query, circle_fits, use_kring=True, coarse=True, probe
                    for base, scale in zip((probe_fits or circle_fits)(near), scales)]
     if whole:
         fitted = np.arange(n)
-        bases = circle_fits(fitted)
+        if bases is None:
+            bases = circle_fits(fitted)
         if blended is None:
             blended = [_limited(base, fitted, probe, scale, probe_area)
                        for base, scale in zip(bases, scales)]

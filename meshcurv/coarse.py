@@ -215,9 +215,9 @@ def estimate(v, f, radii, query, circle_fits, use_kring=True, coarse=True, probe
         near = np.unique(np.concatenate([probe] + [scale.probe_search(probe)[1]
                                                    for scale in scales]))
         probe_area = areas(near)
-    if blended is None and not (whole and probe_fits is None):
-        blended = [_limited(base, near, probe, scale, probe_area)
-                   for base, scale in zip((probe_fits or circle_fits)(near), scales)]
+        if not (whole and probe_fits is None):
+            blended = [_limited(base, near, probe, scale, probe_area)
+                       for base, scale in zip((probe_fits or circle_fits)(near), scales)]
     if whole:
         fitted = np.arange(n)
         if bases is None:

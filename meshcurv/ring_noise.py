@@ -29,15 +29,15 @@ below the jet's there.
 The second differences' matrices ``(I - P)^2`` and ``P^2`` hold ~20-40 entries per row; the
 compiled kernels form one row at a time instead (:func:`two_ring_sums`), with the sums in
 the order scipy.sparse's products take (its ``csr_matmat``, ``multiply`` and row sums, which
-:func:`ring_noise_sparse` keeps as the specification): the same bits, without the matrices
-(a 1M-vertex torus: 2.5 -> 0.5 s, 666 -> ~100 bytes per vertex at the peak).
+:func:`meshcurv.ring_noise_spec.ring_noise` keeps as the specification): the same bits, without the matrices
+(a 1M-vertex torus, one call: 2.46 -> 0.66 s, peak beyond the input 666 -> 112 bytes
+per vertex).
 """
 
 import math
 
 import numba
 import numpy as np
-import scipy.sparse as sp
 from numba import njit, prange
 
 from .neighbors import edge_adjacency
@@ -45,7 +45,7 @@ from .neighbors.csr import thread_ranges
 from .normals import face_vertex_normals
 from .normals.winding import coherent_faces
 
-__all__ = ["ring_noise", "ring_noise_sparse", "mean_edges", "ring_means", "two_ring_sums"]
+__all__ = ["ring_noise", "mean_edges", "ring_means", "two_ring_sums"]
 
 
 def ring_noise(v, f, adjacency=None):
@@ -56,7 +56,7 @@ def ring_noise(v, f, adjacency=None):
     faces wound coherently (:func:`meshcurv.normals.winding.coherent_faces`): the faces'
     winding, and faces listed twice, do not matter. ``adjacency``: the mesh's
     :func:`meshcurv.neighbors.edge_adjacency`, if already made. The same bits as
-    :func:`ring_noise_sparse`."""
+    :func:`meshcurv.ring_noise_spec.ring_noise`."""
     v = np.ascontiguousarray(v, dtype=np.float64)
     n = len(v)
     indptr, indices = edge_adjacency(f, n) if adjacency is None else adjacency
@@ -70,26 +70,6 @@ def ring_noise(v, f, adjacency=None):
         residual = _residual(v, f, ring_mean, indptr, indices, counts)
         spread, per_unit = two_ring_sums(indptr, indices, inverse, residual * residual)
         noise = np.sqrt(spread / per_unit)
-    return noise, edge
-
-
-def ring_noise_sparse(v, f, adjacency=None):
-    """:func:`ring_noise` with scipy.sparse's matrices (the specification of its kernels;
-    ~7x the memory)."""
-    v = np.asarray(v, dtype=np.float64)
-    n = len(v)
-    indptr, indices = edge_adjacency(f, n) if adjacency is None else adjacency
-    counts = np.diff(indptr)
-    rows = np.repeat(np.arange(n), counts)
-    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-        edge = np.bincount(rows, np.linalg.norm(v[rows] - v[indices], axis=1), n) / counts
-        ring_mean = sp.csr_matrix((1.0 / counts[rows], indices, indptr), shape=(n, n))
-        residual = _residual(v, f, ring_mean.__matmul__, indptr, indices, counts)
-        second = sp.identity(n, format="csr") - ring_mean
-        second = second @ second
-        per_unit = np.asarray(second.multiply(second).sum(axis=1)).ravel()
-        two_rings = ring_mean @ ring_mean
-        noise = np.sqrt((two_rings @ (residual * residual)) / (two_rings @ per_unit))
     return noise, edge
 
 
@@ -296,6 +276,14 @@ def _row_bound(indptr, indices):
     return most
 
 
+@njit(cache=True)
+def _row_scratch(n, most):
+    """One thread's work arrays of the product rows: ``sums`` (n,) 0, ``following`` (n,) -1
+    (:func:`_second_row`), ``columns`` and ``values`` (most,)."""
+    return (np.zeros(n), np.full(n, -1, dtype=np.int64), np.empty(most, dtype=np.int64),
+            np.empty(most))
+
+
 @njit(parallel=True, cache=True)
 def _per_unit(indptr, indices, inverse, nthreads):
     """``c_i``, the squared entries of row i of ``(I - P)^2`` summed as scipy.sparse's
@@ -306,10 +294,7 @@ def _per_unit(indptr, indices, inverse, nthreads):
     threads, per = thread_ranges(n, nthreads)
     most = _row_bound(indptr, indices)
     for t in prange(threads):
-        sums = np.zeros(n)
-        following = np.full(n, -1, dtype=np.int64)
-        columns = np.empty(most, dtype=np.int64)
-        values = np.empty(most)
+        sums, following, columns, values = _row_scratch(n, most)
         squares = np.empty(most)
         for i in range(t * per, min(n, (t + 1) * per)):
             count = _second_row(indptr, indices, inverse, i, sums, following, columns, values)
@@ -334,10 +319,7 @@ def _two_ring_means(indptr, indices, inverse, x, y, nthreads):
     threads, per = thread_ranges(n, nthreads)
     most = _row_bound(indptr, indices)
     for t in prange(threads):
-        sums = np.zeros(n)
-        following = np.full(n, -1, dtype=np.int64)
-        columns = np.empty(most, dtype=np.int64)
-        values = np.empty(most)
+        sums, following, columns, values = _row_scratch(n, most)
         for i in range(t * per, min(n, (t + 1) * per)):
             count = _two_ring_row(indptr, indices, inverse, i, sums, following, columns,
                                   values)
@@ -355,7 +337,7 @@ def two_ring_sums(indptr, indices, inverse, squares):
     """``(P^2 squares, P^2 c)``, (n,) each: the 2-ring means of ``squares`` (n,) and of the
     variance factors ``c_i = sum_j ((I - P)^2)_ij^2``, with ``P`` the ring mean (CSR
     adjacency ``indptr, indices``, rows sorted; ``inverse`` (n,) one over each row's
-    count); the same bits as scipy.sparse's products (:func:`ring_noise_sparse`), a row at a
+    count); the same bits as scipy.sparse's products (:func:`meshcurv.ring_noise_spec.ring_noise`), a row at a
     time."""
     threads = numba.get_num_threads()
     per_unit = _per_unit(indptr, indices, inverse, threads)

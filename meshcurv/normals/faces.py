@@ -9,7 +9,7 @@ from numba import njit, prange
 
 from ..neighbors.kring import edge_adjacency
 
-__all__ = ["face_vertex_normals", "face_vertex_normals_numpy", "face_normal_error", "unit_rows"]
+__all__ = ["face_vertex_normals", "face_normal_error", "unit_rows", "edge_cross"]
 
 # Standard deviation of the difference of two neighbors' umbrella heights per unit of
 # Gaussian noise along the normals, on a regular triangulation (6 neighbors, 2 shared by
@@ -37,30 +37,12 @@ def face_vertex_normals(vertices, faces):
     Returns
     -------
     (n, 3) float64 unit normals; NaN for vertices in no (non-degenerate, finite) face. The
-    same bits as :func:`face_vertex_normals_numpy` (the specification), without its
+    same bits as :func:`meshcurv.normals.faces_spec.face_vertex_normals` (the specification), without its
     per-face arrays.
     """
     v = np.ascontiguousarray(vertices, dtype=np.float64)
     f = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
     return _face_vertex_normals(v, f)
-
-
-def face_vertex_normals_numpy(vertices, faces):
-    """:func:`face_vertex_normals` in numpy: each face's edges' cross product (twice its
-    area times its unit normal; 0 where not finite) summed at its corners by
-    ``np.bincount``, then scaled to unit length (:func:`unit_rows`)."""
-    v = np.asarray(vertices, dtype=np.float64)
-    f = np.asarray(faces, dtype=np.int64)
-    n = len(v)
-    if len(f) == 0:
-        return np.full((n, 3), np.nan)
-    # twice the area times the unit normal: the cross product of two edges
-    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-    fn[~np.isfinite(fn).all(axis=1)] = 0.0
-    acc = np.column_stack([
-        np.bincount(f.ravel(), weights=np.repeat(fn[:, c], 3), minlength=n) for c in range(3)
-    ])
-    return unit_rows(acc)
 
 
 @njit(cache=True)

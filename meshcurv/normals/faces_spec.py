@@ -1,13 +1,31 @@
-"""Numpy specification of the face normals' expected error
-(:func:`meshcurv.normals.faces.face_normal_error`): the umbrella heights and their spread over
-each vertex's edges, by gathering every edge at once."""
+"""Numpy specifications of the face normals (:func:`meshcurv.normals.faces.face_vertex_normals`)
+and of their expected error (:func:`meshcurv.normals.faces.face_normal_error`: the umbrella
+heights and their spread over each vertex's edges, by gathering every edge at once)."""
 
 import numpy as np
 
 from ..neighbors.kring import edge_adjacency
-from .faces import UMBRELLA_NOISE
+from .faces import UMBRELLA_NOISE, unit_rows
 
-__all__ = ["face_normal_error"]
+__all__ = ["face_vertex_normals", "face_normal_error"]
+
+
+def face_vertex_normals(vertices, faces):
+    """:func:`meshcurv.normals.faces.face_vertex_normals` in numpy: each face's edges' cross product (twice its
+    area times its unit normal; 0 where not finite) summed at its corners by
+    ``np.bincount``, then scaled to unit length (:func:`unit_rows`)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    n = len(v)
+    if len(f) == 0:
+        return np.full((n, 3), np.nan)
+    # twice the area times the unit normal: the cross product of two edges
+    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    fn[~np.isfinite(fn).all(axis=1)] = 0.0
+    acc = np.column_stack([
+        np.bincount(f.ravel(), weights=np.repeat(fn[:, c], 3), minlength=n) for c in range(3)
+    ])
+    return unit_rows(acc)
 
 
 def face_normal_error(vertices, faces, normals):

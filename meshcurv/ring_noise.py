@@ -28,10 +28,10 @@ below the jet's there.
 
 The second differences' matrices ``(I - P)^2`` and ``P^2`` hold ~20-40 entries per row; the
 compiled kernels form one row at a time instead (:func:`two_ring_sums`), with the sums in
-the order scipy.sparse's products take (its ``csr_matmat``, ``multiply`` and row sums, which
-:func:`meshcurv.ring_noise_spec.ring_noise` keeps as the specification): the same bits, without the matrices
-(a 1M-vertex torus, one call: 2.46 -> 0.66 s, peak beyond the input 666 -> 112 bytes
-per vertex).
+the order scipy.sparse's products take (its ``csr_matmat``, ``multiply`` and row sums,
+which :func:`meshcurv.ring_noise_spec.ring_noise` keeps as the specification): the same
+bits, without the matrices (a 1M-vertex torus, one call: 2.46 -> 0.66 s, peak beyond the
+input 666 -> 112 bytes per vertex).
 """
 
 import math
@@ -337,8 +337,8 @@ def two_ring_sums(indptr, indices, inverse, squares):
     """``(P^2 squares, P^2 c)``, (n,) each: the 2-ring means of ``squares`` (n,) and of the
     variance factors ``c_i = sum_j ((I - P)^2)_ij^2``, with ``P`` the ring mean (CSR
     adjacency ``indptr, indices``, rows sorted; ``inverse`` (n,) one over each row's
-    count); the same bits as scipy.sparse's products (:func:`meshcurv.ring_noise_spec.ring_noise`), a row at a
-    time."""
+    count); the same bits as scipy.sparse's products
+    (:func:`meshcurv.ring_noise_spec.ring_noise`), a row at a time."""
     threads = numba.get_num_threads()
     per_unit = _per_unit(indptr, indices, inverse, threads)
     return _two_ring_means(indptr, indices, inverse, squares, per_unit, threads)

@@ -37,8 +37,8 @@ def face_vertex_normals(vertices, faces):
     Returns
     -------
     (n, 3) float64 unit normals; NaN for vertices in no (non-degenerate, finite) face. The
-    same bits as :func:`meshcurv.normals.faces_spec.face_vertex_normals` (the specification), without its
-    per-face arrays.
+    same bits as :func:`meshcurv.normals.faces_spec.face_vertex_normals` (the
+    specification), without its per-face arrays.
     """
     v = np.ascontiguousarray(vertices, dtype=np.float64)
     f = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)

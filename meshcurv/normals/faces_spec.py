@@ -11,9 +11,10 @@ __all__ = ["face_vertex_normals", "face_normal_error"]
 
 
 def face_vertex_normals(vertices, faces):
-    """:func:`meshcurv.normals.faces.face_vertex_normals` in numpy: each face's edges' cross product (twice its
-    area times its unit normal; 0 where not finite) summed at its corners by
-    ``np.bincount``, then scaled to unit length (:func:`unit_rows`)."""
+    """:func:`meshcurv.normals.faces.face_vertex_normals` in numpy: each face's edges' cross
+    product (twice its area times its unit normal; 0 where not finite) summed at its corners
+    by ``np.bincount``, then scaled to unit length
+    (:func:`meshcurv.normals.faces.unit_rows`)."""
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     n = len(v)

@@ -77,7 +77,7 @@ from scipy.spatial import cKDTree
 from .area_weights import cloud_area_weights, vertex_area_weights
 from .fit.mls import mls_curvature, mls_normals
 from .fit.outliers import outlier_weight
-from .neighbors import ball_counts, ball_grid, edge_adjacency, power_of_two_scale
+from .neighbors import KringWork, ball_counts, ball_grid, edge_adjacency, power_of_two_scale
 from .neighbors.csr import ball_max
 from .neighbors.radius import _longest_edges
 from .pipeline import (BLOCK, _sample_queries, _search_like, ball_search, clean_fraction,
@@ -205,9 +205,11 @@ def estimate(v, f, radii, query, circle_fits, use_kring=True, coarse=True, probe
     # the circle fits first where the probe needs nothing before them: the MLS surface's
     # searches (a cloud's grid: a copy of the points) are not held through them
     bases = circle_fits(np.arange(n)) if whole and probe_fits is None else None
-    # one edge adjacency serves every radius's k-rings and the rings' noise
+    # one edge adjacency serves every radius's k-rings and the rings' noise, one set of work
+    # arrays every k-ring search
     adjacency = edge_adjacency(f, n) if f is not None and use_kring else None
-    scales = [_supports(v, f, r, use_kring, not coarse, adjacency) for r in radii]
+    work = KringWork(n) if adjacency is not None else None
+    scales = [_supports(v, f, r, use_kring, not coarse, adjacency, work) for r in radii]
     probe = _sample_queries(n, PROBE_ROWS)
     blended = [True] * len(radii) if coarse else None
     if blended is None:
@@ -251,9 +253,10 @@ class _Scale(NamedTuple):
     probe_search: Callable
 
 
-def _supports(v, f, radius, use_kring, probed, adjacency=None):
+def _supports(v, f, radius, use_kring, probed, adjacency=None, work=None):
     """The :class:`_Scale` of ``radius``: lists over the mesh's k-rings (``use_kring``, over
-    its edge ``adjacency``, made here if None) or in balls. The passes' lists reach the
+    its edge ``adjacency``, made here if None, with the :class:`KringWork` ``work``, made here
+    if None) or in balls. The passes' lists reach the
     largest support, the probe's ``PROBE_SCALE`` times it; but a ball search lists in the
     order of its grid, whose cells follow its reach, so where the input is ``probed`` the
     passes read the probe's ball lists (the order of the sums the golden outputs record)."""
@@ -264,7 +267,7 @@ def _supports(v, f, radius, use_kring, probed, adjacency=None):
     reach = float(h.max())
     wide = reach * (PROBE_SCALE if probed else 1.0)
     finite = None if use_kring else np.flatnonzero(np.isfinite(vs).all(axis=1))
-    search = kring_search(vs, f, reach, adjacency) if use_kring else \
+    search = kring_search(vs, f, reach, adjacency, work) if use_kring else \
         ball_search(vs, finite, wide)
     probe_search = _search_like(search, vs, f, finite, wide) if use_kring else search
     return _Scale(unit, vs, h, _lists(search), _lists(probe_search))

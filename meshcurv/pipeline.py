@@ -201,7 +201,9 @@ class Search(NamedTuple):
     lengths (nothing stored), ``points`` the coordinates the lists index (the grid's copy in
     grid order, or ``v``) and ``rank`` their vertex indices (None when ``points`` is ``v``);
     ``adjacency`` the mesh's edge graph of k-ring searches (None for balls); ``radius`` the
-    radius it was made for (model units)."""
+    radius it was made for (model units); ``work`` the k-ring searches' work arrays
+    (:class:`meshcurv.neighbors.KringWork`, None for balls), which the searches of other radii
+    over the same mesh share (:func:`_search_like`: they run one at a time)."""
 
     neighbors: Callable
     counts: Callable
@@ -209,6 +211,7 @@ class Search(NamedTuple):
     rank: object
     adjacency: object = None
     radius: float = None
+    work: object = None
 
 
 def _mix_normals(start, refined, beta):
@@ -421,26 +424,31 @@ def ball_search(v, finite, radius):
                   tree.order if in_grid else None, None, radius)
 
 
-def kring_search(v, f, radius, adjacency=None):
+def kring_search(v, f, radius, adjacency=None, work=None):
     """:class:`Search` by connected k-rings over the mesh edges of faces ``f``, limited to the
-    ball of ``radius``; ``adjacency``: their :func:`edge_adjacency`, if already made."""
+    ball of ``radius``; ``adjacency``: their :func:`edge_adjacency`, if already made;
+    ``work``: the :class:`KringWork` of another search over the same mesh, to share (its
+    stamps, 8 bytes per vertex and thread; each query takes fresh tags, so the lists are the
+    same)."""
     if adjacency is None:
         adjacency = edge_adjacency(f, len(v))
-    work = KringWork(len(v))
+    if work is None:
+        work = KringWork(len(v))
 
     def neighbors(idx):
         return kring_neighbors(v, adjacency, radius, idx, work)
 
     def counts(idx):
         return kring_counts(v, adjacency, radius, idx, work)
-    return Search(neighbors, counts, v, None, adjacency, radius)
+    return Search(neighbors, counts, v, None, adjacency, radius, work)
 
 
 def _search_like(search, v, f, finite, radius):
-    """:class:`Search` of the same kind as ``search`` (k-rings over the faces ``f`` or balls
-    about the ``finite`` rows of ``v``) at another ``radius``."""
+    """:class:`Search` of the same kind as ``search`` (k-rings over the faces ``f``, with its
+    edge adjacency and work arrays, or balls about the ``finite`` rows of ``v``) at another
+    ``radius``."""
     if search.adjacency is not None:
-        return kring_search(v, f, radius, search.adjacency)
+        return kring_search(v, f, radius, search.adjacency, search.work)
     return ball_search(v, finite, radius)
 
 
@@ -1101,7 +1109,7 @@ def run_radii(v, f, given_normals, radii, query, plan, progress=False):
     if plan.use_kring:
         finite = None
         searches = [kring_search(v, f, radii[0])]
-        searches += [kring_search(v, f, r, searches[0].adjacency) for r in radii[1:]]
+        searches += [_search_like(searches[0], v, f, finite, r) for r in radii[1:]]
         # work per query from a sample: smaller blocks for large balls, an error where infeasible
         block = min(block_size(s, query, r, what) for s, r in zip(searches, radii))
     else:

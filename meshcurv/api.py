@@ -11,7 +11,8 @@ from scipy.spatial import cKDTree
 
 from . import coarse as coarse_mls, pipeline, scale as scale_select, weld
 from .inputs import as_arrays
-from .neighbors import MAX_BALL_FRACTION, default_radius, power_of_two_scale
+from .neighbors import default_radius, power_of_two_scale
+from .neighbors.radius import local_radii
 from .options import Options, resolve_plan
 from .result import Status
 from .weld import expand_rows
@@ -163,12 +164,11 @@ def _resolve_radius(radius, v, f, details=False):
 
 def _auto_ladder(v, f, r0):
     """The radii of the per-vertex scale around the default ``r0``
-    (:func:`meshcurv.scale.ladder`), without those whose balls would hold more than
-    ``MAX_BALL_FRACTION`` of the points (small inputs; ``r0`` itself always stays)."""
-    n_finite = int(np.isfinite(v).all(axis=1).sum())
-    most = float(default_radius(v, target_neighbors=MAX_BALL_FRACTION * n_finite, faces=f))
-    cap = max(r0, most) if np.isfinite(most) else r0
-    return [r for r in scale_select.ladder(r0) if r <= cap * (1 + 1e-12)]
+    (:func:`meshcurv.scale.ladder`), without the larger ones whose balls would not stay local
+    (:func:`meshcurv.neighbors.radius.local_radii`: more than ``MAX_BALL_FRACTION`` of the
+    points, or beyond a patch of the surface); ``r0`` and the smaller ones always stay."""
+    ladder = scale_select.ladder(r0)
+    return [r for r in ladder if r < r0] + local_radii(v, [r for r in ladder if r >= r0], f)
 
 
 def _run_rescaled(v, f, given_normals, radius, query, plan, progress, scale):

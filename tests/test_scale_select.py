@@ -288,3 +288,53 @@ def test_tiled_cli_refuses_auto_in_one_line(tmp_path, capsys):
     assert code == 2
     err = capsys.readouterr().err.strip()
     assert "--radius auto" in err and len(err.splitlines()) == 1
+
+
+@pytest.mark.parametrize("with_faces", [False, True])
+def test_ladder_stops_where_the_balls_reach_around_a_thin_tube(with_faces):
+    # a tube of radius 0.1 (curvature 10): balls of curvature x radius 0.6 - 1.2 are patches,
+    # at 2.4 they hold the tube's whole section (flatness near 1), far fewer than a quarter of
+    # the points all the same
+    from meshcurv.neighbors.radius import local_radii
+
+    tube = surfaces.cylinder(0.1, height=8.0, n_around=64)
+    radii = [0.06, 0.085, 0.12, 0.24, 0.34]
+    points = tube.vertices
+    if not with_faces:
+        rng = np.random.default_rng(3)
+        points = points + rng.normal(scale=1e-4, size=points.shape)   # not a grid
+    faces = tube.faces if with_faces else None
+    assert local_radii(points, radii, faces) == radii[:3]
+
+
+def test_ladder_keeps_the_radii_of_noisy_flat_balls():
+    # noise makes small balls thick (flatness ~ 4 sigma^2 / r^2, above PATCH_FLATNESS at the
+    # smallest radius here) and thinner as they grow: nothing is beyond a patch
+    from meshcurv.neighbors.radius import PATCH_FLATNESS, _grid_balls, local_radii
+
+    rng = np.random.default_rng(4)
+    points = np.column_stack([rng.uniform(0, 1, (20000, 2)), rng.normal(scale=0.01, size=20000)])
+    radii = [0.02 * 2 ** (j / 2) for j in range(5)]
+    assert _grid_balls(points)(radii[0])[0] > PATCH_FLATNESS
+    assert local_radii(points, radii) == radii
+
+
+def test_ladder_stops_before_balls_of_a_quarter_of_the_points():
+    from meshcurv.neighbors.radius import local_radii
+
+    rng = np.random.default_rng(5)
+    points = np.column_stack([rng.uniform(0, 1, (400, 2)), np.zeros(400)])
+    # a flat square: balls of radius 0.45 hold about half of it
+    assert local_radii(points, [0.1, 0.2, 0.45, 0.6]) == [0.1, 0.2]
+
+
+def test_auto_ladder_of_a_large_cloud_is_measured_at_its_own_radii():
+    # the ladder's limit came from a radius holding a quarter of the points, measured with
+    # balls that large (57 s and 8.9 GB at 100k points); its own balls hold ~50 - 800 points.
+    # Here the largest, 0.49, is a patch of the tube (curvature x radius 0.99)
+    from meshcurv.api import _auto_ladder
+
+    v = surfaces.torus(2.0, 0.5, 400, 100).vertices
+    r0 = default_radius(v)
+    assert _auto_ladder(v, None, r0) == scale.ladder(r0)
+    assert 0.48 < max(scale.ladder(r0)) < 0.5

@@ -255,11 +255,11 @@ class _Scale(NamedTuple):
 
 def _supports(v, f, radius, use_kring, probed, adjacency=None, work=None):
     """The :class:`_Scale` of ``radius``: lists over the mesh's k-rings (``use_kring``, over
-    its edge ``adjacency``, made here if None, with the :class:`KringWork` ``work``, made here
-    if None) or in balls. The passes' lists reach the
-    largest support, the probe's ``PROBE_SCALE`` times it; but a ball search lists in the
-    order of its grid, whose cells follow its reach, so where the input is ``probed`` the
-    passes read the probe's ball lists (the order of the sums the golden outputs record)."""
+    its edge ``adjacency`` and with the :class:`KringWork` ``work``, each made here if None)
+    or in balls. The passes' lists reach the largest support, the probe's ``PROBE_SCALE``
+    times it; but a ball search lists in the order of its grid, whose cells follow its reach,
+    so where the input is ``probed`` the passes read the probe's ball lists (the order of the
+    sums the golden outputs record)."""
     unit = power_of_two_scale(radius)
     with np.errstate(over="ignore"):
         vs = v * unit if unit != 1.0 else v

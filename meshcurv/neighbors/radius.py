@@ -213,9 +213,8 @@ def local_radii(points, radii, faces=None):
 
 def _kring_balls(points, faces):
     """``balls(r) -> (flatness, count)`` of a mesh: the flatness (:func:`_patch_flatness`)
-    and the median number of points (the vertex included) of its
-    k-ring balls of radius r (the neighborhoods its fits use) about a sample of its finite
-    vertices in faces."""
+    and the median number of points (the vertex included) of its k-ring balls of radius r
+    (the neighborhoods its fits use) about a sample of its finite vertices in faces."""
     from .kring import KringWork, edge_adjacency, kring_neighbors
 
     used = np.zeros(len(points), dtype=bool)
@@ -231,7 +230,7 @@ def _kring_balls(points, faces):
         counts = np.diff(indptr)
         owner = np.repeat(np.arange(len(sample)), counts)
         flatness = _patch_flatness(points, sample, np.concatenate([sample, indices]),
-                                    np.concatenate([np.arange(len(sample)), owner]))
+                                   np.concatenate([np.arange(len(sample)), owner]))
         return flatness, float(np.median(counts)) + 1.0
     return balls
 

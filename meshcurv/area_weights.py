@@ -161,6 +161,11 @@ def cloud_area_weights(points, rows=None):
             if not np.isfinite(extent):
                 extent = np.max(np.abs(q))
         unit = power_of_two_scale(extent)
+        # points far closer together than their coordinates' size (2^24 and 2^24 + 5e-324):
+        # the largest power of two that keeps the coordinates finite
+        size = float(np.max(np.abs(q)))
+        if size > 0.0 and unit > 1.0 and size > math.ldexp(1.0, 1000) / unit:
+            unit = math.ldexp(1.0, 1000 - math.frexp(size)[1])
         area = nearest_areas(q * unit, p[asked] * unit, np.inf, CLOUD_RING_POINTS, workers=-1)
         largest = area.max(initial=0.0)
         if largest > 0.0:

@@ -70,6 +70,16 @@ def test_cloud_weights_are_the_squared_distance_to_the_sixth_nearest_distinct_po
 
 
 
+@pytest.mark.parametrize("size", [2.0 ** 24, 1e300])
+def test_cloud_weights_of_points_closer_than_their_coordinates_resolve_stay_finite(size):
+    # found by the fuzz test: two points 5e-324 apart at y = 2^24 have a spread of 5e-324,
+    # whose power-of-two scale (2^1000) took the coordinates to inf and the k-d tree raised
+    points = np.array([[0.0, size, 0.0], [0.0, size, 5e-324], [1e-300, size, 0.0]])
+    assert np.isfinite(cloud_area_weights(points)).all()
+    res = meshcurv.principal_curvatures(points, radius=0.3)
+    assert not res.valid.any()
+
+
 def test_weights_of_some_rows_are_the_whole_weights_up_to_a_common_factor():
     # the probe of the MLS blend reads the weights of a few rows' lists alone
     rng = np.random.default_rng(3)

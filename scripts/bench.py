@@ -379,8 +379,8 @@ def stage_times(v, f, normals, radius):
     calls is wrapped with a timer for the duration of one call with the normals given and one
     with them estimated; the kernels are the leaves of the pipeline (neighbour search,
     normals, orientation, circle fits, MLS surface), with the blend's ring noise (one stage:
-    numpy and its own kernels), and what remains of the call's time is numpy and Python glue. Returns
-    ``{mode: {stage: seconds}}``.
+    numpy and its own kernels), and what remains of the call's time is numpy and Python glue.
+    Returns ``{mode: {stage: seconds}}``.
     """
     import meshcurv
     from meshcurv import coarse, pipeline

@@ -3,6 +3,8 @@ surface (never across a thin sheet). Compiled kernels (edge adjacency, breadth-f
 the CSR lists through :mod:`meshcurv.neighbors.csr`) and their wrappers.
 """
 
+import math
+
 import numba
 import numpy as np
 from numba import njit, prange
@@ -10,8 +12,8 @@ from numba import njit, prange
 from ..linalg import insertion_sort
 from .csr import gather_streams, overflowed, sample_step, stream_capacity, thread_ranges
 
-__all__ = ["edge_adjacency", "kring_neighbors", "kring_counts", "KringWork",
-           "edge_adjacency_csr", "kring_ball_csr", "kring_ball_counts"]
+__all__ = ["edge_adjacency", "mean_edge_lengths", "kring_neighbors", "kring_counts",
+           "KringWork", "edge_adjacency_csr", "kring_ball_csr", "kring_ball_counts"]
 
 def edge_adjacency(faces, n_vertices):
     """Undirected edge graph of a triangle mesh as CSR ``(indptr, indices)`` over vertices.
@@ -27,6 +29,25 @@ def edge_adjacency(faces, n_vertices):
     """
     faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
     return edge_adjacency_csr(faces, int(n_vertices))
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def mean_edge_lengths(points, indptr, indices):
+    """Mean length (n,) of each vertex's edges over the edge graph ``(indptr, indices)``
+    (:func:`edge_adjacency`), summed in the row's order (as ``np.bincount`` of the lengths
+    sums them); NaN where a vertex has none (0 / 0, as numpy divides)."""
+    n = len(indptr) - 1
+    edge = np.empty(n)
+    for i in prange(n):
+        total = 0.0
+        for e in range(indptr[i], indptr[i + 1]):
+            j = indices[e]
+            d0 = points[i, 0] - points[j, 0]
+            d1 = points[i, 1] - points[j, 1]
+            d2 = points[i, 2] - points[j, 2]
+            total += math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        edge[i] = total / (indptr[i + 1] - indptr[i])
+    return edge
 
 
 class KringWork:

@@ -7,7 +7,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from ..neighbors.kring import edge_adjacency
+from ..neighbors.kring import edge_adjacency, mean_edge_lengths
 
 __all__ = ["face_vertex_normals", "face_normal_error", "unit_rows", "edge_cross"]
 
@@ -112,36 +112,32 @@ def face_normal_error(vertices, faces, normals, adjacency=None):
     """
     v = np.ascontiguousarray(vertices, dtype=np.float64)
     indptr, indices = edge_adjacency(faces, len(v)) if adjacency is None else adjacency
-    spread, edge = np.empty(len(v)), np.empty(len(v))
-    umbrella_spread(v, np.ascontiguousarray(normals, dtype=np.float64), indptr, indices,
-                    spread, edge)
+    spread = np.empty(len(v))
+    umbrella_spread(v, np.ascontiguousarray(normals, dtype=np.float64), indptr, indices, spread)
+    edge = mean_edge_lengths(v, indptr, indices)
     with np.errstate(invalid="ignore", divide="ignore"):
         return spread / UMBRELLA_NOISE / edge
 
 
 @njit(parallel=True, cache=True)
-def umbrella_spread(points, normals, indptr, indices, spread, edge):
+def umbrella_spread(points, normals, indptr, indices, spread):
     """Over the edge graph ``(indptr, indices)`` (CSR, each edge once each way), per vertex
     i, with ``h_i`` the mean of ``(points[j] - points[i]) . normals[i]`` over its neighbors
-    j (its umbrella height): ``edge[i]`` the neighbors' mean distance and ``spread[i]`` the
-    RMS of ``h_j - h_i`` over the edges of i and of its neighbors (both (n,) float64
-    outputs; NaN without neighbors)."""
+    j (its umbrella height): ``spread[i]`` the RMS of ``h_j - h_i`` over the edges of i and
+    of its neighbors ((n,) float64 output; NaN without neighbors)."""
     n = points.shape[0]
     height = np.empty(n)
     square = np.empty(n)
     for i in prange(n):
         k = indptr[i + 1] - indptr[i]
         h = 0.0
-        d = 0.0
         for e in range(indptr[i], indptr[i + 1]):
             j = indices[e]
             o0 = points[j, 0] - points[i, 0]
             o1 = points[j, 1] - points[i, 1]
             o2 = points[j, 2] - points[i, 2]
             h += o0 * normals[i, 0] + o1 * normals[i, 1] + o2 * normals[i, 2]
-            d += math.sqrt(o0 * o0 + o1 * o1 + o2 * o2)
         height[i] = h / k if k > 0 else np.nan
-        edge[i] = d / k if k > 0 else np.nan
     for i in prange(n):
         s = 0.0
         for e in range(indptr[i], indptr[i + 1]):

@@ -498,8 +498,8 @@ def _reindex(faces, used):
 # Accuracy cases (--accuracy-cases): one group at a time, each against exact curvature
 # ---------------------------------------------------------------------------------------------
 
-ACCURACY_GROUPS = ("surfaces", "cnc", "density", "icosahedra", "coarse", "decimated", "spikes",
-                   "terrain")
+ACCURACY_GROUPS = ("surfaces", "cnc", "density", "icosahedra", "coarse", "decimated",
+                   "ellipsoids", "spikes", "terrain")
 MESHLAB_NAMES = tuple(MESHLAB_METHODS)
 
 # CNC reference: mean |H - H_true| over the six clouds, the authors' code (Avg-Hexagram,
@@ -512,7 +512,7 @@ CNC_FILES = ("goursat_010000", "goursat_025000", "goursat_050000",
              "torus_010000", "torus_025000", "torus_050000")
 
 # Seeds of the generated noise, spikes and samplings (fixed: reruns give the same points).
-SEED_CNC, SEED_DENSITY, SEED_SPIKES, SEED_TERRAIN = 2023, 25, 13, 7
+SEED_CNC, SEED_DENSITY, SEED_SPIKES, SEED_TERRAIN, SEED_ELLIPSOID = 2023, 25, 13, 7, 0
 
 
 def find_cnc_dir():
@@ -898,6 +898,31 @@ def group_decimated(methods, size, switches, timeout, **_):
     return rows
 
 
+# Ellipsoids at resolutions where a ball of ~100 vertices is no small cap at the ends of their
+# long axis: (semi-axes, icosphere subdivisions or None, random points or None).
+ELLIPSOIDS = (((2.0, 1.5, 1.0), 3, None), ((2.0, 1.5, 1.0), 4, None),
+              ((2.0, 1.5, 1.0), None, 642), ((3.0, 1.0, 0.5), 4, None),
+              ((3.0, 1.0, 0.5), 5, None))
+
+
+def group_ellipsoids(methods, size, switches, timeout, **_):
+    """Clean ellipsoid meshes (:data:`ELLIPSOIDS`) whose curvature varies across the default
+    radius's balls: meshcurv at its default radius with the faces and on the points alone;
+    MeshLab on the mesh, SDQF and APSS at meshcurv's radius for the mesh. Errors over all
+    vertices."""
+    from meshcurv import surfaces
+
+    rows = []
+    for axes, subdivisions, n in ELLIPSOIDS[:2] if size == "smallest" else ELLIPSOIDS:
+        s = surfaces.ellipsoid(axes, subdivisions or 0, "random" if n else "regular", n or 0,
+                               seed=SEED_ELLIPSOID)
+        sampling = f"{n} random points" if n else f"icosphere of {len(s.vertices)} vertices"
+        case = f"ellipsoid {' / '.join(f'{a:g}' for a in axes)}, {sampling}"
+        rows += _mesh_and_points_rows("ellipsoids", case, s.vertices, s.faces, s, methods,
+                                      switches, timeout)
+    return rows
+
+
 def sphere_with_spikes(subdivisions=5, noise=0.0005, spike_share=0.02, spike_range=(0.01, 0.04),
                        seed=SEED_SPIKES):
     """An icosphere (unit radius) with Gaussian noise along the normal (``noise`` x the
@@ -981,7 +1006,8 @@ def group_terrain(methods, size, switches, timeout, **_):
 
 GROUP_RUNNERS = {"surfaces": group_surfaces, "cnc": group_cnc, "density": group_density,
                  "icosahedra": group_icosahedra, "coarse": group_coarse,
-                 "decimated": group_decimated, "spikes": group_spikes, "terrain": group_terrain}
+                 "decimated": group_decimated, "ellipsoids": group_ellipsoids,
+                 "spikes": group_spikes, "terrain": group_terrain}
 
 
 def _git_commit():
@@ -1106,6 +1132,16 @@ GROUP_TEXT = {
                   "vertex's projection onto the exact surface. meshcurv at its default radius "
                   "with the faces and on the points alone; MeshLab on the mesh, SDQF and APSS "
                   "at meshcurv's radius for the mesh. Errors over all vertices."),
+    "ellipsoids": ("Ellipsoids whose curvature varies across the default balls",
+                   "Clean ellipsoids 2 / 1.5 / 1 (`meshcurv.surfaces.ellipsoid`: icospheres of 3 "
+                   "and 4 subdivisions scaled by the semi-axes, and 642 uniform random points of "
+                   "the sphere, seed 0, with their hull's faces) and 3 / 1 / 0.5 (icospheres of "
+                   "4 and 5 subdivisions; curvature 12 at the ends of the long axis): at the "
+                   "default radius the balls there turn by more than a radian over a surface "
+                   "whose curvature varies across them. meshcurv at its default radius with the "
+                   "faces and on the points alone; MeshLab on the mesh, SDQF and APSS at "
+                   "meshcurv's radius for the mesh. Errors over all vertices against the exact "
+                   "ellipsoid."),
     "terrain": ("Airborne-scan-like terrains",
                 "z = 0.03 x^2 - 0.02 y^2 + 0.1 sin(2 pi x / wavelength) on [-10, 10]^2, "
                 "gentle (wavelength 4 pi, ~19 default radii) and bumpy (wavelength 3, ~4.5 "
@@ -1131,7 +1167,7 @@ GROUP_TEXT = {
 def _summary(results):
     """Markdown rows: per case of the mesh groups, meshcurv against the best MeshLab method."""
     out = []
-    for group in ("surfaces", "coarse", "decimated", "spikes"):
+    for group in ("surfaces", "coarse", "decimated", "ellipsoids", "spikes"):
         rows = results.get(group, [])
         keys = list(dict.fromkeys((r["case"], r.get("noise")) for r in rows))
         for case, noise in keys:

@@ -174,6 +174,10 @@ def test_smallest_configuration_of_every_group_runs(tmp_path):
     assert {r["method"] for r in results["spikes"]} == {"meshcurv, mesh", "meshcurv, points"}
     assert len(results["decimated"]) == 4                       # 2 meshes x (mesh, points)
     assert all(r["valid"] == 1.0 and r["mean_dk"] < 0.05 for r in results["decimated"])
+    assert len(results["ellipsoids"]) == 4                      # 2 meshes x (mesh, points)
+    # the 642-vertex ellipsoid's ends take smaller balls: 0.059 -> 0.023 (mesh)
+    assert results["ellipsoids"][0]["method"] == "meshcurv, mesh"
+    assert results["ellipsoids"][0]["mean_dk"] < 0.04
     if CNC_DIR:
         modes = {(r["method"], r["radius_rule"]) for r in results["cnc"]}
         assert len(modes) == 4 and len(results["cnc"]) == 2 * 4   # files x modes

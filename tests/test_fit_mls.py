@@ -201,7 +201,9 @@ def _same_bits(a, b):
 
 def test_inputs_whose_circle_fits_are_not_limited_by_the_sampling_keep_them():
     # not coarse, and the probe's median disagreement stays near the MLS estimate's own
-    # change (ratio 0.5-2.0 on these, against 2.5): the circle fits' bits
+    # change (ratio 0.5-2.0 on these, against 2.5): the circle fits' bits at the default
+    # radius (given: by default the ellipsoid's ends take smaller balls, whose calls probe
+    # again)
     ellipsoid = surfaces.ellipsoid((2.0, 1.5, 1.0), 4)
     saddle = surfaces.monkey_saddle(sampling="random", n=4000)
     torus = surfaces.torus(2.0, 0.5, 240, 60)
@@ -211,9 +213,11 @@ def test_inputs_whose_circle_fits_are_not_limited_by_the_sampling_keep_them():
                  (saddle.vertices, saddle.faces), (noisy.vertices, noisy.faces)):
         v, f = np.asarray(v, dtype=np.float64), np.asarray(f)
         for faces in (f, None):
-            assert not default_radius(v, faces=faces, details=True)[1]
-            a = meshcurv.principal_curvatures(v, faces)
-            assert _same_bits(a, meshcurv.principal_curvatures(v, faces, coarse_fit="circles"))
+            r, coarse = default_radius(v, faces=faces, details=True)
+            assert not coarse
+            a = meshcurv.principal_curvatures(v, faces, radius=r)
+            assert _same_bits(a, meshcurv.principal_curvatures(v, faces, radius=r,
+                                                               coarse_fit="circles"))
 
 
 def test_a_cloud_with_normals_just_limited_by_its_sampling_gets_the_mls_surface():
@@ -314,9 +318,10 @@ def test_the_result_says_how_much_of_each_row_is_the_mls_surfaces():
     assert np.array_equal(cloud.mls_share,
                           clean_fraction(cloud.noise, coarse_mls.NOISE_SCALE * cloud.radius))
     assert meshcurv.principal_curvatures(v, f, coarse_fit="circles").mls_share is None
-    # a clean ellipsoid: the probe keeps the circle fits, no blend
+    # a clean ellipsoid at its default radius: the probe keeps the circle fits, no blend
     e = surfaces.ellipsoid((2.0, 1.5, 1.0), 4)
-    assert meshcurv.principal_curvatures(e.vertices, e.faces).mls_share is None
+    r = default_radius(e.vertices, faces=e.faces)
+    assert meshcurv.principal_curvatures(e.vertices, e.faces, radius=r).mls_share is None
     # a row with no estimate keeps share 0
     bad = v.copy()
     bad[5] = np.nan

@@ -6,6 +6,8 @@ curvature by :mod:`meshcurv.coarse` where the input is coarse for its shape or i
 are limited by its sampling.
 """
 
+import math
+
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -302,7 +304,7 @@ def _estimate(v, f, given_normals, radius, query, plan, progress):
             return _blended(v, f, given_normals, radii, query, plan, progress, coarse=False)
         return _run_radii(v, f, given_normals, radii, query, plan, progress)
     auto = isinstance(radius, str) and radius == "auto"
-    default = radius is None
+    chosen = auto or radius is None        # meshcurv chooses the radius
     radius, coarse = _resolve_radius(None if auto else radius, v, f, details=True)
     # inputs coarse for their shape keep the default radius under "auto": it was made smaller
     # so that its balls stay on a local patch, and its per-vertex scale lost to it on half of
@@ -317,32 +319,38 @@ def _estimate(v, f, given_normals, radius, query, plan, progress):
             return [scale_select.run_auto(v, f, given_normals, r0, rows,
                                           plan._replace(wide_field=False), progress,
                                           radii=radii, run_radii=_run_radii)]
-        if plan.coarse_mls and np.isfinite(r0):
-            # the probe judges the default radius's fits: "auto" blends where the default does
-            def default_radius(rows):
-                return _run_radii(v, f, given_normals, [r0], rows, plan, progress)
-            res = coarse_mls.estimate(v, f, [r0], query, per_vertex_scale, plan.use_kring,
-                                      coarse, probe_fits=default_radius,
-                                      area_weights=plan.area_weights)[0]
-        else:
-            res = per_vertex_scale(query)[0]
+
+        def estimate(rows):
+            if plan.coarse_mls and np.isfinite(r0):
+                # the probe judges the default radius's fits: "auto" blends where the default
+                # does
+                def default_radius(near):
+                    return _run_radii(v, f, given_normals, [r0], near, plan, progress)
+                return coarse_mls.estimate(v, f, [r0], rows, per_vertex_scale, plan.use_kring,
+                                           coarse, probe_fits=default_radius,
+                                           area_weights=plan.area_weights)[0]
+            return per_vertex_scale(rows)[0]
     else:
-        res = _at_radius(v, f, given_normals, radius, query, plan, progress, coarse)
-    if default and np.isfinite(radius):
-        res = _varying_caps(res, v, f, given_normals, query, plan, progress, coarse)
+        def estimate(rows):
+            return _at_radius(v, f, given_normals, radius, rows, plan, progress, coarse)
+    res = estimate(query)
+    if chosen and np.isfinite(radius):
+        res = _varying_caps(res, v, f, given_normals, query, plan, progress, estimate)
     # rows whose balls reached around the surface (at every scale of the ladder: "auto")
     return _smaller_balls(res, v, f, given_normals, query, plan, progress)
 
 
-def _varying_caps(res, v, f, given_normals, query, plan, progress, coarse):
-    """``res`` (rows ``query``, at the default radius ``res.radius``, model units)
-    with its rows estimated in smaller balls where the ball is no small cap of a surface whose
-    curvature varies across it, so that the circles fitted to its normal sections are biased:
-    ``max(|k1|, |k2|) r`` above :data:`meshcurv.scale.MAX_ARC` and the curvature's spread over
-    the ball (:func:`meshcurv.scale.curvature_spread`, from the rows at that radius; rows of
-    other vertices are estimated for it where ``query`` leaves them out) above
+def _varying_caps(res, v, f, given_normals, query, plan, progress, estimate):
+    """``res`` (rows ``query`` of ``estimate(rows)``, the default radius's or "auto"'s, whose
+    ``radius`` is the default radius, model units) with its rows at that radius estimated in
+    smaller balls where the ball is no small cap of a surface whose curvature varies across
+    it, so that the circles fitted to its normal sections are biased: ``max(|k1|, |k2|) r``
+    above :data:`meshcurv.scale.MAX_ARC` (r the row's radius, at most the default) and the
+    curvature's spread over the default radius's ball
+    (:func:`meshcurv.scale.curvature_spread`, from the rows of ``estimate``, which gives those
+    of other vertices where ``query`` leaves them out) above
     :data:`meshcurv.scale.CAP_VARIATION`. Each such row is estimated again at 2^(-j/2) times
-    the radius, j = 1, 2, ... :data:`CAP_STEPS`, as a call at that radius gives it, and takes
+    its radius, j = 1, 2, ... :data:`CAP_STEPS`, as a call at that radius gives it, and takes
     that row while it has :data:`meshcurv.scale.MIN_SUPPORT` neighbors and its quartic's
     residual (``noise``) fell below :data:`meshcurv.pipeline.SHAPE_RESIDUAL_DROP` of the row
     it replaces (the shape's residual falls like r^5, noise stays: noisy rows keep their ball,
@@ -355,8 +363,8 @@ def _varying_caps(res, v, f, given_normals, query, plan, progress, coarse):
     used = np.full(len(res), res.radius) if res.radius_used is None else res.radius_used
     with np.errstate(invalid="ignore"):
         kappa = np.fmax(np.abs(res.k1), np.abs(res.k2))
-        rows = np.flatnonzero((res.status == Status.OK) & (used == res.radius)
-                              & (kappa * res.radius > scale_select.MAX_ARC))
+        rows = np.flatnonzero((res.status == Status.OK) & (used <= res.radius)
+                              & (kappa * used > scale_select.MAX_ARC))
     if not len(rows):
         return res
     field = np.full(len(v), np.nan)
@@ -365,24 +373,31 @@ def _varying_caps(res, v, f, given_normals, query, plan, progress, coarse):
     others = np.setdiff1d(members, query)
     if len(others):
         # the field at the balls' other vertices, as a call over every vertex gives it
-        more = _at_radius(v, f, given_normals, res.radius, others, plan, progress, coarse)
+        more = estimate(others)
         with np.errstate(invalid="ignore"):
             field[others] = np.where(more.status == Status.OK,
                                      np.fmax(np.abs(more.k1), np.abs(more.k2)), np.nan)
     spread = scale_select.curvature_spread(field, query[rows], owner, members)
     rows = rows[spread > scale_select.CAP_VARIATION]
-    noise = res.noise[rows]
-    for step in range(1, CAP_STEPS + 1):
+    now, noise = used[rows], res.noise[rows]
+    for _ in range(CAP_STEPS):
+        going = np.zeros(len(rows), dtype=bool)
+        for r in np.unique(now):                 # one radius ("auto": each of its ladder's)
+            part = np.flatnonzero(now == r)
+            smaller = r / math.sqrt(2.0)
+            sub = _at_radius(v, f, given_normals, smaller, query[rows[part]], plan, progress,
+                             False)
+            with np.errstate(invalid="ignore"):
+                took = ((sub.status == Status.OK)
+                        & (sub.n_neighbors >= scale_select.MIN_SUPPORT)
+                        & (sub.noise < pipeline.SHAPE_RESIDUAL_DROP * noise[part]))
+                wide = np.fmax(np.abs(sub.k1), np.abs(sub.k2)) * smaller > scale_select.MAX_ARC
+            res = _with_rows(res, sub, rows[part], took)
+            going[part] = took & wide
+            now[part[took]], noise[part[took]] = smaller, sub.noise[took]
+        rows, now, noise = rows[going], now[going], noise[going]
         if not len(rows):
             break
-        r = res.radius * 2.0 ** (-step / 2.0)
-        sub = _at_radius(v, f, given_normals, r, query[rows], plan, progress, False)
-        with np.errstate(invalid="ignore"):
-            took = ((sub.status == Status.OK) & (sub.n_neighbors >= scale_select.MIN_SUPPORT)
-                    & (sub.noise < pipeline.SHAPE_RESIDUAL_DROP * noise))
-            wide = np.fmax(np.abs(sub.k1), np.abs(sub.k2)) * r > scale_select.MAX_ARC
-        res = _with_rows(res, sub, rows, took)
-        rows, noise = rows[took & wide], sub.noise[took & wide]
     return res
 
 

@@ -345,7 +345,7 @@ def _varying_caps(res, v, f, given_normals, query, plan, progress, estimate):
     ``radius`` is the default radius, model units) with its rows at that radius estimated in
     smaller balls where the ball is no small cap of a surface whose curvature varies across
     it, so that the circles fitted to its normal sections are biased: ``max(|k1|, |k2|) r``
-    above :data:`meshcurv.scale.MAX_ARC` (r the row's radius, at most the default) and the
+    above :data:`meshcurv.scale.CAP_ARC` (r the row's radius, at most the default) and the
     curvature's spread over the default radius's ball
     (:func:`meshcurv.scale.curvature_spread`, from the rows of ``estimate``, which gives those
     of other vertices where ``query`` leaves them out) above
@@ -357,14 +357,16 @@ def _varying_caps(res, v, f, given_normals, query, plan, progress, estimate):
     where a smaller one gains less bias than it adds noise); it goes on while its ball is still
     no small cap. ``radius_used`` says which radius each row took.
 
-    Clean ellipsoids 2 / 1.5 / 1 (icosphere of 642 vertices), 3 / 1 / 0.5 (10242) and MeshLab's
-    2 % decimation of one: mean |dk| 0.059, 0.094, 0.073 -> 0.023, 0.026, 0.053 (measured with
-    a script); tori, whose sections' curvature is constant, keep their rows."""
+    Clean ellipsoid meshes 2 / 1.5 / 1 (icosphere of 642 vertices), 3 / 1 / 0.5 (10242) and
+    MeshLab's 2 % decimation of one: mean |dk| 0.059, 0.094, 0.073 -> 0.013, 0.016, 0.047
+    (``--accuracy-cases ellipsoids`` and ``decimated``); tori, whose sections' curvature is
+    constant, keep their rows."""
+    arc = scale_select.CAP_ARC["mesh" if f is not None else "cloud"]
     used = np.full(len(res), res.radius) if res.radius_used is None else res.radius_used
     with np.errstate(invalid="ignore"):
         kappa = np.fmax(np.abs(res.k1), np.abs(res.k2))
         rows = np.flatnonzero((res.status == Status.OK) & (used <= res.radius)
-                              & (kappa * used > scale_select.MAX_ARC))
+                              & (kappa * used > arc))
     if not len(rows):
         return res
     field = np.full(len(v), np.nan)
@@ -391,7 +393,7 @@ def _varying_caps(res, v, f, given_normals, query, plan, progress, estimate):
                 took = ((sub.status == Status.OK)
                         & (sub.n_neighbors >= scale_select.MIN_SUPPORT)
                         & (sub.noise < pipeline.SHAPE_RESIDUAL_DROP * noise[part]))
-                wide = np.fmax(np.abs(sub.k1), np.abs(sub.k2)) * smaller > scale_select.MAX_ARC
+                wide = np.fmax(np.abs(sub.k1), np.abs(sub.k2)) * smaller > arc
             res = _with_rows(res, sub, rows[part], took)
             going[part] = took & wide
             now[part[took]], noise[part[took]] = smaller, sub.noise[took]

@@ -52,7 +52,7 @@ from .result import Status, mls_shares, oriented_like
 
 __all__ = ["ladder", "select", "run_auto", "LADDER_EXPONENTS", "NOISE_GAIN",
            "NORMAL_GAIN", "MIN_SUPPORT", "MAX_ARC", "SMOOTH_NEIGHBORS", "corrected_rows",
-           "CAP_VARIATION", "ball_members", "curvature_spread"]
+           "CAP_VARIATION", "CAP_ARC", "ball_members", "curvature_spread"]
 
 # Ladder r_j = R0 * 2^(j / 2): from half the default ball's points (~50) to 8 times (~800;
 # what position noise needs to draw level with estimators using normals, issue 15).
@@ -87,6 +87,15 @@ SMOOTH_NEIGHBORS = 16
 # (icospheres of 642 to 10242 vertices, random samplings, MeshLab's decimations, with and
 # without noise). 0.2 lies between; 0.1 and 0.4 chose the same rows within 5 %.
 CAP_VARIATION = 0.2
+# Arc (max(|k1|, |k2|) r) above which such a ball is no small cap: on meshes 0.7 rad (the
+# bound the whole-input radius choice had), on clouds 1 rad. Mean |dk| at the default radius,
+# 1 -> 0.7 (measured with a script): meshes of clean ellipsoids 2 / 1.5 / 1 of 642 and 2562
+# vertices 0.023 -> 0.013, 0.0029 -> 0.0018, 3 / 1 / 0.5 of 2562 and 10242 0.098 -> 0.096,
+# 0.026 -> 0.016, MeshLab's 2 % decimation 0.053 -> 0.047, no mesh worse; clouds gain where
+# coarse (the same ellipsoids' points 0.034 -> 0.030, 0.038 -> 0.030) and lose where finer
+# (2562 points 0.0025 -> 0.0026, 5000 random 0.0050 -> 0.0054, the clean CNC cloud
+# goursat_010000, mean |dH| 0.00064 -> 0.00091: smaller balls of a random sampling).
+CAP_ARC = {"mesh": 0.7, "cloud": MAX_ARC}
 
 
 def ladder(r0, exponents=LADDER_EXPONENTS):

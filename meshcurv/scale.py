@@ -79,7 +79,7 @@ MAX_ARC = 1.0
 # Estimated vertices whose error curves are averaged (the vertex itself included).
 SMOOTH_NEIGHBORS = 16
 # Spread of the curvature across a ball (:func:`curvature_spread`) above which a ball that is
-# no small cap (max(|k1|, |k2|) r > MAX_ARC) is taken to lie on a surface whose curvature
+# no small cap (max(|k1|, |k2|) r > CAP_ARC) is taken to lie on a surface whose curvature
 # varies across it, where the circles fitted to its normal sections are biased (a circle fits
 # a section of constant curvature over any arc). Measured at the default radius on rows whose
 # ball is no small cap: median 0.002-0.026 on tori (trimesh's 32 x 32 to 96 x 24, MeshLab's

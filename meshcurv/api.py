@@ -9,7 +9,6 @@ are limited by its sampling.
 import math
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from . import coarse as coarse_mls, pipeline, scale as scale_select, weld
 from .inputs import as_arrays
@@ -403,6 +402,13 @@ def _varying_caps(res, v, f, given_normals, query, plan, progress, estimate):
     return res
 
 
+def _ball_counts(v, centres, radius):
+    """The number of finite points of ``v`` within ``radius`` of each of ``v[centres]`` (c,)
+    (:func:`meshcurv.scale.ball_members`: at any scale of the coordinates)."""
+    owner, _ = scale_select.ball_members(v, centres, radius)
+    return np.bincount(owner, minlength=len(centres))
+
+
 def _with_rows(res, sub, rows, took):
     """``res`` with its rows ``rows`` replaced by those of ``sub`` (one per entry of ``rows``,
     in that order) where ``took``."""
@@ -437,13 +443,12 @@ def _smaller_balls(res, v, f, given_normals, query, plan, progress):
     if (not len(rows) or not plan.sparse_retry
             or pipeline.side_normals_estimated(plan, f is not None)):
         return res
-    tree = cKDTree(v[np.isfinite(v).all(axis=1)])
-    held = tree.query_ball_point(v[query[rows]], res.radius, return_length=True)
+    held = _ball_counts(v, query[rows], res.radius)
     for factor in WRAP_FACTORS:
         r = res.radius * factor
         # a ball that kept WHOLE_PART of the points of one twice as wide holds a whole part
         # (a surface's ball keeps a quarter, a tube's half) and would reach around it too
-        now = tree.query_ball_point(v[query[rows]], r, return_length=True)
+        now = _ball_counts(v, query[rows], r)
         tried = now <= WHOLE_PART * held
         if tried.any():
             sub = _at_radius(v, f, given_normals, r, query[rows[tried]], plan, progress, False)

@@ -194,3 +194,18 @@ def test_tubes_two_to_four_times_narrower_than_the_ball_are_marked_on_clouds():
         for factor in (3.0, 3.5):
             res = meshcurv.principal_curvatures(points, radius=factor * tube)
             assert np.all(res.status[rows] == Status.WRAPS_AROUND), (tube, factor)
+
+
+@pytest.mark.parametrize("unit", [2.0 ** -700, 2.0 ** 600])
+def test_smaller_balls_at_extreme_scales_as_at_unit_scale(unit):
+    # the ellipsoid 3 / 1 / 0.5 of 642 vertices: 40 rows whose default ball reaches around its
+    # ends are estimated again in smaller balls. Their balls were counted on the raw
+    # coordinates: at 2^600 the k-d tree's squares overflowed (ValueError), at 2^-700 they
+    # underflowed and those rows kept WRAPS_AROUND
+    s = surfaces.ellipsoid((3.0, 1.0, 0.5), 3)
+    base = meshcurv.principal_curvatures(s.vertices, s.faces)
+    res = meshcurv.principal_curvatures(s.vertices * unit, s.faces)
+    assert np.array_equal(res.status, base.status)
+    scale = np.nanmax(np.abs(base.k1))
+    assert np.allclose(res.k1 * unit, base.k1, rtol=0, atol=1e-9 * scale, equal_nan=True)
+    assert np.allclose(res.radius_used / unit, base.radius_used, rtol=1e-12, equal_nan=True)

@@ -92,9 +92,10 @@ class CurvatureResult:
     radius_used : (n,) float64, the neighborhood radius of the row's estimate, model units:
         ``radius`` for a fixed radius, the radius each vertex chose with ``radius="auto"``
         (:mod:`meshcurv.scale`), the wider radius where ``sparse_retry`` re-estimated a row
-        that had too few points, the smaller one where its ball reached around the surface;
-        NaN where ``valid`` is False. None where the producer does
-        not tell (then ``radius`` where valid)
+        that had too few points, the smaller one where its ball reached around the surface
+        or, at the default radius and with "auto", was no small cap of a surface whose
+        curvature varies across it (:func:`meshcurv.api._varying_caps`); NaN where ``valid``
+        is False. None where the producer does not tell (then ``radius`` where valid)
     mls_share : (n,) float64 in [0, 1] or None, the share of the MLS surface's curvature in
         each row's k1 and k2 (:mod:`meshcurv.coarse`; where it is at least 0.5, d1, d2 and
         the normal are the MLS surface's too); 0 where the row kept its circle fits. None

@@ -363,7 +363,7 @@ def _varying_caps(res, v, f, given_normals, query, plan, progress, estimate):
     arc = scale_select.CAP_ARC["mesh" if f is not None else "cloud"]
     used = np.full(len(res), res.radius) if res.radius_used is None else res.radius_used
     with np.errstate(invalid="ignore"):
-        kappa = np.fmax(np.abs(res.k1), np.abs(res.k2))
+        kappa = scale_select.largest_curvature(res)
         rows = np.flatnonzero((res.status == Status.OK) & (used <= res.radius)
                               & (kappa * used > arc))
     if not len(rows):
@@ -377,7 +377,7 @@ def _varying_caps(res, v, f, given_normals, query, plan, progress, estimate):
         more = estimate(others)
         with np.errstate(invalid="ignore"):
             field[others] = np.where(more.status == Status.OK,
-                                     np.fmax(np.abs(more.k1), np.abs(more.k2)), np.nan)
+                                     scale_select.largest_curvature(more), np.nan)
     spread = scale_select.curvature_spread(field, query[rows], owner, members)
     rows = rows[spread > scale_select.CAP_VARIATION]
     now, noise = used[rows], res.noise[rows]
@@ -392,7 +392,7 @@ def _varying_caps(res, v, f, given_normals, query, plan, progress, estimate):
                 took = ((sub.status == Status.OK)
                         & (sub.n_neighbors >= scale_select.MIN_SUPPORT)
                         & (sub.noise < pipeline.SHAPE_RESIDUAL_DROP * noise[part]))
-                wide = np.fmax(np.abs(sub.k1), np.abs(sub.k2)) * smaller > arc
+                wide = scale_select.largest_curvature(sub) * smaller > arc
             res = _with_rows(res, sub, rows[part], took)
             going[part] = took & wide
             now[part[took]], noise[part[took]] = smaller, sub.noise[took]
@@ -400,13 +400,6 @@ def _varying_caps(res, v, f, given_normals, query, plan, progress, estimate):
         if not len(rows):
             break
     return res
-
-
-def _ball_counts(v, centres, radius):
-    """The number of finite points of ``v`` within ``radius`` of each of ``v[centres]`` (c,)
-    (:func:`meshcurv.scale.ball_members`: at any scale of the coordinates)."""
-    owner, _ = scale_select.ball_members(v, centres, radius)
-    return np.bincount(owner, minlength=len(centres))
 
 
 def _with_rows(res, sub, rows, took):
@@ -443,19 +436,22 @@ def _smaller_balls(res, v, f, given_normals, query, plan, progress):
     if (not len(rows) or not plan.sparse_retry
             or pipeline.side_normals_estimated(plan, f is not None)):
         return res
-    held = _ball_counts(v, query[rows], res.radius)
-    for factor in WRAP_FACTORS:
+    # the balls' points at the radius and at each smaller one, counted at once
+    counts = scale_select.ball_counts(v, query[rows],
+                                      [res.radius * x for x in (1.0,) + WRAP_FACTORS])
+    held, left = counts[0], np.arange(len(rows))     # left: the rows' columns of counts
+    for factor, at_factor in zip(WRAP_FACTORS, counts[1:]):
         r = res.radius * factor
+        now = at_factor[left]
         # a ball that kept WHOLE_PART of the points of one twice as wide holds a whole part
         # (a surface's ball keeps a quarter, a tube's half) and would reach around it too
-        now = _ball_counts(v, query[rows], r)
         tried = now <= WHOLE_PART * held
         if tried.any():
             sub = _at_radius(v, f, given_normals, r, query[rows[tried]], plan, progress, False)
             done = np.zeros(len(rows), dtype=bool)
             done[tried] = sub.status == Status.OK
             res = _with_rows(res, sub, rows[tried], done[tried])
-            rows, now = rows[~done], now[~done]
+            rows, now, left = rows[~done], now[~done], left[~done]
         held = now
         if not len(rows):
             break

@@ -52,7 +52,8 @@ from .result import Status, mls_shares, oriented_like
 
 __all__ = ["ladder", "select", "run_auto", "LADDER_EXPONENTS", "NOISE_GAIN",
            "NORMAL_GAIN", "MIN_SUPPORT", "MAX_ARC", "SMOOTH_NEIGHBORS", "corrected_rows",
-           "CAP_VARIATION", "CAP_ARC", "ball_members", "curvature_spread"]
+           "CAP_VARIATION", "CAP_ARC", "ball_members", "ball_counts", "curvature_spread",
+           "largest_curvature"]
 
 # Ladder r_j = R0 * 2^(j / 2): from half the default ball's points (~50) to 8 times (~800;
 # what position noise needs to draw level with estimators using normals, issue 15).
@@ -91,7 +92,7 @@ CAP_VARIATION = 0.2
 # bound the whole-input radius choice had), on clouds 1 rad. Mean |dk| at the default radius,
 # 1 -> 0.7 (measured with a script): meshes of clean ellipsoids 2 / 1.5 / 1 of 642 and 2562
 # vertices 0.023 -> 0.013, 0.0029 -> 0.0018, 3 / 1 / 0.5 of 2562 and 10242 0.098 -> 0.096,
-# 0.026 -> 0.016, MeshLab's 2 % decimation 0.053 -> 0.047, no mesh worse; clouds gain where
+# 0.026 -> 0.016, MeshLab's 2 % decimation 0.053 -> 0.047, no mesh tried worse; clouds gain where
 # coarse (the same ellipsoids' points 0.034 -> 0.030, 0.038 -> 0.030) and lose where finer
 # (2562 points 0.0025 -> 0.0026, 5000 random 0.0050 -> 0.0054, the clean CNC cloud
 # goursat_010000, mean |dH| 0.00064 -> 0.00091: smaller balls of a random sampling).
@@ -293,35 +294,70 @@ def run_auto(v, f, given_normals, r0, query, plan, progress=False, radii=None,
     return assemble(results, choice, base=at_r0, at=at)
 
 
-def ball_members(points, centres, radius):
-    """The finite points of ``points`` (n, 3) within ``radius`` (model units) of each of
-    ``points[centres]``: (owner, members), flat int64 arrays, ``members[i]`` in the ball of
-    ``centres[owner[i]]`` (owners ascending; none for a centre with no finite position).
-    Searched among the points in the centres' bounding box widened by the radius, on
-    coordinates scaled by the power of two that keeps the radius's square finite, or less
-    where that box's would not be (centres 1e154 apart)."""
+def _balls_about(points, centres, radius):
+    """A k-d tree over the finite points of ``points`` (n, 3) that a ball of ``radius`` (model
+    units, the largest asked for) about one of ``points[centres]`` can hold, on scaled
+    coordinates: ``(query, near, about)``, ``query(r)`` the tree's lists (indices into
+    ``near``) of the balls of radius r <= ``radius`` about ``points[centres[about]]`` (the
+    centres with a finite position); None where there is no such centre. The coordinates are
+    scaled by the power of two that keeps the radius's square finite, or less where the
+    centres' bounding box widened by the radius would not be (centres 1e154 apart)."""
     s = power_of_two_scale(radius)
     with np.errstate(over="ignore", invalid="ignore"):
         p = points * s if s != 1.0 else points
         usable = np.isfinite(p).all(axis=1)
         about = np.flatnonzero(usable[centres])   # a centre that is no point has no ball
         if not len(about):
-            return np.zeros(0, np.int64), np.zeros(0, np.int64)
-        r = radius * s
-        lo = p[centres[about]].min(axis=0) - r
-        hi = p[centres[about]].max(axis=0) + r
+            return None
+        reach = radius * s
+        lo = p[centres[about]].min(axis=0) - reach
+        hi = p[centres[about]].max(axis=0) + reach
         near = np.flatnonzero(usable & np.all((p >= lo) & (p <= hi), axis=1))
         half = float(np.max(0.5 * hi - 0.5 * lo))     # half the box's extent
         if not np.isfinite(half):
-            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+            return None
         if half > 2.0 ** 499:
-            shrink = 2.0 ** (499 - math.ceil(math.log2(half)))
-            p, r = p * shrink, r * shrink
-    lists = cKDTree(p[near]).query_ball_point(p[centres[about]], r)
+            s_box = 2.0 ** (499 - math.ceil(math.log2(half)))
+            p, s = p * s_box, s * s_box
+    tree = cKDTree(p[near])
+    at = p[centres[about]]
+    return (lambda r, **kw: tree.query_ball_point(at, r * s, **kw)), near, about
+
+
+def ball_members(points, centres, radius):
+    """The finite points of ``points`` (n, 3) within ``radius`` (model units) of each of
+    ``points[centres]``: (owner, members), flat int64 arrays, ``members[i]`` in the ball of
+    ``centres[owner[i]]`` (owners ascending; none for a centre with no finite position).
+    Searched at any scale of the coordinates (:func:`_balls_about`)."""
+    found = _balls_about(points, centres, radius)
+    if found is None:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    query, near, about = found
+    lists = query(radius)
     counts = np.fromiter((len(a) for a in lists), dtype=np.int64, count=len(lists))
     owner = np.repeat(about.astype(np.int64), counts)
     members = np.concatenate(lists).astype(np.int64) if counts.sum() else owner
     return owner, near[members]
+
+
+def ball_counts(points, centres, radii):
+    """The number of finite points of ``points`` (n, 3) within each of ``radii`` (model
+    units) of each of ``points[centres]``: (len(radii), c) int64, from one search structure
+    (:func:`_balls_about`, at any scale of the coordinates); 0 for a centre with no finite
+    position."""
+    out = np.zeros((len(radii), len(centres)), dtype=np.int64)
+    found = _balls_about(points, centres, max(radii)) if len(radii) else None
+    if found is not None:
+        query, _, about = found
+        for row, r in zip(out, radii):
+            row[about] = query(r, return_length=True)
+    return out
+
+
+def largest_curvature(result):
+    """max(|k1|, |k2|) per row of a :class:`meshcurv.CurvatureResult`, 1/model units (NaN
+    where it has no estimate)."""
+    return np.fmax(np.abs(result.k1), np.abs(result.k2))
 
 
 def curvature_spread(kappa, centres, owner, members):

@@ -35,7 +35,8 @@ def save_curvature_mesh(ms, path):
     ``scalar_k1 scalar_k2 scalar_mean scalar_gaussian scalar_shape_index scalar_curvedness``
     (float64, NaN where invalid), ``scalar_valid`` (uint8), ``scalar_d1x .. scalar_d2z``
     (float64), ``scalar_status`` (uint8), ``scalar_outlier_score``, ``scalar_radius_used``
-    (float64, model units) and ``scalar_mls_share`` when the mesh has them,
+    (float64, model units), ``scalar_mls_share`` and ``scalar_jet_share`` when the mesh has
+    them,
     ``scalar_n_neighbors scalar_n_samples scalar_residual`` when the mesh has them
     (a mesh read by :func:`load_curvature_mesh`), the vertex quality as ``quality`` and the
     vertex colour as ``red green blue``. Values are written bit for bit. Textures, face
@@ -73,7 +74,7 @@ def save_curvature_mesh(ms, path):
         values = point(name)
         for i, c in enumerate("xyz"):
             fields[name + c] = values[:, i]
-    for f in ("outlier_score", "radius_used", "mls_share"):
+    for f in ("outlier_score", "radius_used", "mls_share", "jet_share"):
         if has_attribute(scalar, f):
             fields[f] = scalar(f)
     for f, dtype in _DIAGNOSTICS.items():
@@ -117,7 +118,8 @@ def load_curvature_mesh(ms, path):
     if n != len(data.vertices):
         raise ValueError(f"load_curvature_mesh: {path}: MeshLab read {n} vertices, the file "
                          f"has {len(data.vertices)}")
-    for f in shape.FIELDS + ("valid", "status", "outlier_score", "radius_used", "mls_share") + \
+    for f in shape.FIELDS + ("valid", "status", "outlier_score", "radius_used", "mls_share",
+                             "jet_share") + \
             tuple(_DIAGNOSTICS):
         if f in data.fields:
             store_scalar(ms, f, np.asarray(data.fields[f], dtype=np.float64))

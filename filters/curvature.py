@@ -13,7 +13,7 @@ import pymeshlab
 from meshcurv import principal_curvatures, shape
 from meshcurv.io import bbox_diagonal, usable_normals
 from meshcurv.options import check_options
-from meshcurv.result import mls_shares
+from meshcurv.result import jet_shares, mls_shares
 
 from .attributes import store_point, store_scalar
 
@@ -75,8 +75,8 @@ def compute_curvature_cga_per_vertex(self, radius=None, ndirections=8, neighborh
       fields clamped at the ``clamp`` / 100 - ``clamp`` percentiles); grey where there is no
       estimate
     * custom scalar attributes ``k1, k2, mean, gaussian, shape_index, curvedness`` (NaN where
-      there is no estimate), ``valid`` (1 or 0), ``status``, ``outlier_score``, ``radius_used``
-      and ``mls_share`` (:data:`meshcurv.result.CURVATURE_FIELDS`)
+      there is no estimate), ``valid`` (1 or 0), ``status``, ``outlier_score``, ``radius_used``,
+      ``mls_share`` and ``jet_share`` (:data:`meshcurv.result.CURVATURE_FIELDS`)
     * custom point attributes ``d1, d2``: unit principal directions (NaN where invalid)
 
     ``ms.save_current_mesh`` writes only quality and colour of these; save them all with
@@ -204,6 +204,7 @@ def _store_result(ms, res, fields, quality, cmap, clamp):
     store_scalar(ms, "outlier_score", res.outlier_score)
     store_scalar(ms, "radius_used", res.radius_used)
     store_scalar(ms, "mls_share", mls_shares(res))
+    store_scalar(ms, "jet_share", jet_shares(res))
     store_point(ms, "d1", res.d1)
     store_point(ms, "d2", res.d2)
     # quality: NaN would break MeshLab's ramps and statistics, so invalid vertices read 0

@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from . import coarse as coarse_mls, pipeline, scale as scale_select, weld
+from . import coarse as coarse_mls, jet_blend, pipeline, scale as scale_select, weld
 from .inputs import as_arrays
 from .neighbors import default_radius, power_of_two_scale
 from .neighbors.radius import local_radii
@@ -264,7 +264,8 @@ def principal_curvatures(vertices, faces=None, normals=None, radius=None, n_dire
         ``k1, k2, d1, d2, normals, valid, status, mean, gaussian, shape_index, curvedness``, the
         diagnostics ``n_neighbors, n_samples, residual, noise`` (one row per vertex, or per
         query), the ``radius`` used, each row's ``radius_used`` and, where the MLS blend of
-        :mod:`meshcurv.coarse` ran, each row's ``mls_share``.
+        :mod:`meshcurv.coarse` ran, each row's ``mls_share``; where the ring jets' blend of
+        :mod:`meshcurv.jet_blend` ran (a radius meshcurv chose), each row's ``jet_share``.
 
     Raises
     ------
@@ -336,7 +337,10 @@ def _estimate(v, f, given_normals, radius, query, plan, progress):
     if chosen and np.isfinite(radius):
         res = _varying_caps(res, v, f, given_normals, query, plan, progress, estimate)
     # rows whose balls reached around the surface (at every scale of the ladder: "auto")
-    return _smaller_balls(res, v, f, given_normals, query, plan, progress)
+    res = _smaller_balls(res, v, f, given_normals, query, plan, progress)
+    if chosen and plan.ring_jet:
+        res = jet_blend.blend(res, v, f if plan.use_kring else None, query)
+    return res
 
 
 def _varying_caps(res, v, f, given_normals, query, plan, progress, estimate):

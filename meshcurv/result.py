@@ -10,11 +10,12 @@ from . import shape
 from .fit import constants
 
 __all__ = ["CurvatureResult", "Status", "CURVATURE_FIELDS", "curvature_fields", "mls_shares",
+           "jet_shares",
            "oriented_like"]
 
 # Per-vertex curvature fields of every annotated file (PLY properties, LAS extra bytes).
 CURVATURE_FIELDS = shape.FIELDS + ("valid", "status", "d1x", "d1y", "d1z", "d2x", "d2y", "d2z",
-                                   "outlier_score", "radius_used", "mls_share")
+                                   "outlier_score", "radius_used", "mls_share", "jet_share")
 
 
 class Status(IntEnum):
@@ -101,6 +102,11 @@ class CurvatureResult:
         the normal are the MLS surface's too); 0 where the row kept its circle fits. None
         where no MLS blend ran: ``coarse_fit="circles"``, tiled runs, and inputs whose
         circle fits the probe found not limited by their sampling
+    jet_share : (n,) float64 in [0, 1] or None, how far each row's shape operator moved from
+        the estimate before towards its ring jet's, a quartic over the vertex's 3-ring
+        (:mod:`meshcurv.jet_blend`; k1, k2, d1 and d2 follow, the normal stays); 0 where the
+        row kept it. None where no jet blend ran: a radius given, ``ring_jet=False``, tiled
+        runs
     """
 
     k1: np.ndarray
@@ -119,6 +125,7 @@ class CurvatureResult:
     outlier_score: np.ndarray = None
     radius_used: np.ndarray = None
     mls_share: np.ndarray = None
+    jet_share: np.ndarray = None
 
     @property
     def mean(self):
@@ -151,7 +158,7 @@ def curvature_fields(result):
     ``outlier_score`` float64 (NaN where not computed), ``radius_used`` float64 (model units,
     NaN where not valid; ``radius`` where valid if the result does not tell), ``mls_share``
     float64 in [0, 1] (the MLS surface's share of the row's curvature; 0 where no blend
-    ran)."""
+    ran), ``jet_share`` float64 in [0, 1] (the ring jet's; 0 where no jet blend ran)."""
     out = {f: np.asarray(getattr(result, f), dtype=np.float64) for f in shape.FIELDS}
     out["valid"] = np.asarray(result.valid, dtype=np.uint8)
     out["status"] = np.asarray(result.status, dtype=np.uint8)
@@ -166,6 +173,7 @@ def curvature_fields(result):
     out["radius_used"] = (np.where(out["valid"] == 1, float(result.radius), np.nan)
                           if used is None else np.asarray(used, dtype=np.float64))
     out["mls_share"] = mls_shares(result)
+    out["jet_share"] = jet_shares(result)
     return out
 
 
@@ -173,6 +181,13 @@ def mls_shares(result):
     """``result.mls_share`` as float64 (n,), 0 where no blend ran (``mls_share`` None): the
     field of every annotated file and of the pymeshlab filter."""
     share = result.mls_share
+    return np.zeros(len(result.k1)) if share is None else np.asarray(share, dtype=np.float64)
+
+
+def jet_shares(result):
+    """``result.jet_share`` as float64 (n,), 0 where no jet blend ran (``jet_share`` None):
+    the field of every annotated file and of the pymeshlab filter."""
+    share = result.jet_share
     return np.zeros(len(result.k1)) if share is None else np.asarray(share, dtype=np.float64)
 
 

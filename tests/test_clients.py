@@ -23,7 +23,8 @@ from meshcurv import cli, io, result, shape, surfaces  # noqa: E402
 # every per-vertex field of an annotated file besides geometry, normals, quality and colour
 FIELDS = result.CURVATURE_FIELDS + ("n_neighbors", "n_samples", "residual")
 # the fields the pymeshlab filter leaves on a mesh (valid as 0/1, d1 d2 as point attributes)
-FILTER_SCALARS = shape.FIELDS + ("valid", "status", "outlier_score", "radius_used", "mls_share")
+FILTER_SCALARS = shape.FIELDS + ("valid", "status", "outlier_score", "radius_used", "mls_share",
+                                 "jet_share")
 
 
 @pytest.fixture(scope="module")

@@ -57,6 +57,7 @@ def _check_against_api(ms, res, quality, summary, vertices, faces):
     for name in ("outlier_score", "radius_used"):
         _assert_same(m.vertex_custom_scalar_attribute_array(name), getattr(res, name))
     _assert_same(m.vertex_custom_scalar_attribute_array("mls_share"), result.mls_shares(res))
+    _assert_same(m.vertex_custom_scalar_attribute_array("jet_share"), result.jet_shares(res))
     _assert_same(m.vertex_custom_point_attribute_matrix("d1"), res.d1)
     _assert_same(m.vertex_custom_point_attribute_matrix("d2"), res.d2)
     # colour: the ramp over the field (same tables as shape.colorize; MeshLab rounds to bytes)

@@ -51,6 +51,7 @@ def _cases():
     cloud = _noisy(sphere.vertices, 0.003, seed=3)
     coarse = trimesh.creation.torus(1.0, 0.3, major_sections=64, minor_sections=16)
     fine = trimesh.creation.torus(1.0, 0.3, major_sections=96, minor_sections=24)
+    ellipsoid = surfaces.ellipsoid((2.0, 1.5, 1.0), 3)
     pc = meshcurv.principal_curvatures
     return {
         # the circle fits alone (coarse_fit="circles"), and blended with the MLS surface where
@@ -80,6 +81,10 @@ def _cases():
         # per-vertex scale, blended where the default radius's fits are (a torus whose circle
         # fits the probe finds limited by its sampling; coarse inputs keep the default radius)
         "torus_96x24_auto_mls": lambda: pc(fine.vertices, fine.faces, radius="auto"),
+        # a clean ellipsoid at its default radius: varying caps, then the ring jets (3-rings
+        # of the mesh, nearest neighbours of the cloud)
+        "ellipsoid_642_ring_jets": lambda: pc(ellipsoid.vertices, ellipsoid.faces),
+        "ellipsoid_642_cloud_ring_jets": lambda: pc(ellipsoid.vertices),
     }
 
 

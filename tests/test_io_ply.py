@@ -68,6 +68,20 @@ def test_the_mls_share_is_a_field_and_0_where_no_blend_ran(tmp_path, torus, toru
         assert got.tobytes() == np.ascontiguousarray(expected, dtype="<f8").tobytes()
 
 
+def test_the_jet_share_is_a_field_and_0_where_no_jet_blend_ran(tmp_path):
+    """A clean ellipsoid at its default radius takes the ring jets on most rows: the file
+    holds the result's shares bit for bit; at a given radius (result None): zeros."""
+    s = surfaces.ellipsoid((2.0, 1.5, 1.0), 3)
+    chosen = meshcurv.principal_curvatures(s.vertices, s.faces)
+    given = meshcurv.principal_curvatures(s.vertices, s.faces, radius=0.5)
+    assert chosen.jet_share.max() > 0.5 and given.jet_share is None
+    for res, expected in ((chosen, chosen.jet_share), (given, np.zeros(len(s.vertices)))):
+        out = tmp_path / "j.ply"
+        io.write_annotated(str(out), io.MeshData(s.vertices, s.faces), res)
+        got = PlyData.read(str(out))["vertex"].data[io.ply_property("jet_share")]
+        assert got.tobytes() == np.ascontiguousarray(expected, dtype="<f8").tobytes()
+
+
 def test_point_cloud_ply_has_no_faces_and_keeps_extra_fields(tmp_path):
     pts = np.random.default_rng(1).normal(size=(200, 3))
     src = tmp_path / "cloud.ply"

@@ -93,10 +93,17 @@ def test_clumpy_sphere_is_valid_almost_everywhere(seed):
         res = meshcurv.principal_curvatures(p, normals=normals)
         assert res.valid.mean() >= 0.995
         err = _errors(res, 1.0, 1.0)
-        # exact normals: circle fits are exact on a sphere at any radius; estimated ones: the
-        # retried rows' plane fits over 2-4x the radius, ~1e-3 typical
-        assert err.mean() < (1e-9 if normals is not None else 2e-3)
-        assert err.max() < (1e-9 if normals is not None else 0.5)
+        # exact normals: circle fits are exact on a sphere at any radius, and the ring jets
+        # (quartics over 37 nearest points, not exact on a sphere) are passed by but for the
+        # tail of their error bound (measured, seed 11: one row of 7996 takes 0.13 of its jet,
+        # |dk| 5.3e-4); estimated ones: the retried rows' plane fits over 2-4x the radius,
+        # ~1e-3 typical
+        assert err.mean() < (1e-7 if normals is not None else 2e-3)
+        assert err.max() < (2e-3 if normals is not None else 0.5)
+        if normals is not None:
+            alone = _errors(meshcurv.principal_curvatures(p, normals=normals, ring_jet=False),
+                            1.0, 1.0)
+            assert alone.max() < 1e-9
         # what stays invalid is a point with almost nobody near it (or, rarely, a lone point
         # of a small ball the outlier pass cannot tell from a stray one)
         assert np.all(np.isin(res.status[~res.valid], [Status.TOO_FEW_NEIGHBORS,

@@ -13,7 +13,7 @@ from ..linalg import insertion_sort
 from .csr import gather_streams, overflowed, sample_step, stream_capacity, thread_ranges
 
 __all__ = ["edge_adjacency", "mean_edge_lengths", "kring_neighbors", "kring_counts",
-           "KringWork", "edge_adjacency_csr", "kring_ball_csr", "kring_ball_counts"]
+           "KringWork", "edge_adjacency_csr", "kring_ball_csr", "kring_ball_counts", "hop_rings"]
 
 def edge_adjacency(faces, n_vertices):
     """Undirected edge graph of a triangle mesh as CSR ``(indptr, indices)`` over vertices.
@@ -261,3 +261,60 @@ def kring_ball_counts(adj_ptr, adj_idx, points, query, radius, stamp, queue, tag
             out[qi] = _kring_one(adj_ptr, adj_idx, points, query[qi], 3 * (tag0 + qi), r2max,
                                  stamp[t], queue[t], dummy, 0, 0)
     return out
+
+
+@njit(cache=True)
+def _hop_ring_one(adj_ptr, adj_idx, s, depth, tag, stamp, queue, out, base):
+    """Breadth-first over mesh edges from vertex ``s`` to ``depth`` hops: the vertices found
+    (``s`` excluded, by hop count, then in the search's order) written to ``out[base:]`` when
+    ``out`` holds them (a counting pass passes an empty one); returns ``(found, inner)``,
+    their number and how many lie within ``depth - 1`` hops. ``stamp`` marks visited vertices
+    with ``tag``, a value unique to this search."""
+    stamp[s] = tag
+    queue[0] = s
+    head = 0
+    tail = 1
+    inner = 0
+    for hop in range(depth):
+        level_end = tail
+        if hop == depth - 1:
+            inner = tail - 1
+        while head < level_end:
+            a = queue[head]
+            head += 1
+            for e in range(adj_ptr[a], adj_ptr[a + 1]):
+                b = adj_idx[e]
+                if stamp[b] == tag:
+                    continue
+                stamp[b] = tag
+                queue[tail] = b
+                tail += 1
+    if out.shape[0] > 0:
+        for i in range(1, tail):
+            out[base + i - 1] = queue[i]
+    return tail - 1, inner
+
+
+@njit(parallel=True, cache=True)
+def hop_rings(adj_ptr, adj_idx, query, depth, stamp, queue, tag0):
+    """The ``depth``-ring of each query vertex over mesh edges (every vertex within ``depth``
+    hops, however far): CSR ``(indptr, indices, inner)``, each row by hop count (the query
+    vertex excluded) and ``inner`` (m,) int64 the entries of each row within ``depth - 1``
+    hops. Work arrays as :func:`kring_ball_csr`'s (stamps ``3 * (tag0 + qi) + {0, 1}``)."""
+    m = query.shape[0]
+    counts = np.zeros(m + 1, dtype=np.int64)
+    inner = np.zeros(m, dtype=np.int64)
+    nthreads, per = thread_ranges(m, stamp.shape[0])
+    dummy = np.empty(0, dtype=np.int32)
+    for t in prange(nthreads):
+        for qi in range(t * per, min(m, (t + 1) * per)):
+            counts[qi + 1], inner[qi] = _hop_ring_one(adj_ptr, adj_idx, query[qi], depth,
+                                                      3 * (tag0 + qi), stamp[t], queue[t],
+                                                      dummy, 0)
+    indptr = np.cumsum(counts)
+    indices = np.empty(indptr[m], dtype=np.int32)
+    for t in prange(nthreads):
+        for qi in range(t * per, min(m, (t + 1) * per)):
+            _hop_ring_one(adj_ptr, adj_idx, query[qi], depth, 3 * (tag0 + qi) + 1, stamp[t],
+                          queue[t], indices, indptr[qi])
+    return indptr, indices, inner

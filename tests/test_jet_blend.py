@@ -1,0 +1,228 @@
+"""Ring jets (meshcurv.fit.ring_jet against its numpy specification, the hop rings of
+meshcurv.neighbors.kring) and their blend into the circle fits (meshcurv.jet_blend)."""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import meshcurv
+from meshcurv import jet_blend, surfaces
+from meshcurv.fit import ring_jet, ring_jet_spec
+from meshcurv.neighbors import kring
+
+
+def hop_lists(faces, n, query, depth):
+    """The kernel's hop rings of ``query`` to ``depth`` hops, and each row's inner count."""
+    adjacency = kring.edge_adjacency(faces, n)
+    work = kring.KringWork(n)
+    return kring.hop_rings(adjacency[0], adjacency[1], np.asarray(query, np.int64), depth,
+                           work.stamp, work.queue, 0)
+
+
+def test_hop_rings_are_the_vertices_within_that_many_edges():
+    """Against powers of the adjacency matrix: every row holds the vertices 1 .. depth hops
+    away, those within depth - 1 first (``inner`` of them), on a mesh with a border."""
+    s = surfaces.paraboloid(spacing=0.5, extent=3.0)
+    n = len(s.vertices)
+    e = np.concatenate([s.faces[:, [0, 1]], s.faces[:, [1, 2]], s.faces[:, [2, 0]]])
+    a = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)).tocsr()
+    a = ((a + a.T + sp.identity(n)) > 0).astype(np.int64)
+    reach = [sp.identity(n, dtype=np.int64, format="csr")]
+    for _ in range(4):
+        reach.append(((reach[-1] @ a) > 0).astype(np.int64).tocsr())
+    query = np.arange(0, n, 5)
+    indptr, indices, inner = hop_lists(s.faces, n, query, 4)
+    for i, q in enumerate(query):
+        row = indices[indptr[i]:indptr[i + 1]]
+        within = [set(reach[k][q].indices) - {q} for k in (3, 4)]
+        assert len(row) == len(set(row)) and set(row) == within[1]
+        assert set(row[:inner[i]]) == within[0]
+
+
+@pytest.mark.parametrize("surface", [
+    surfaces.ellipsoid((3.0, 1.0, 0.5), 4),
+    surfaces.torus(2.0, 0.5, 60, 20),
+    surfaces.saddle("random", n=3000),
+])
+def test_ring_jet_matches_its_numpy_specification(surface):
+    """Shape operators of both supports, the standard error and the frame at every 7th
+    vertex. Tolerances: the kernel's Cholesky and the specification's LAPACK solve of the
+    same normal equations (condition up to ~1e9 at the scaled quartic's terms on the random
+    sampling) agree to 1e-7 of the entries (measured 1.5e-8); the standard error is a
+    residual sum formed by cancellation in the kernel (sum h^2 - c . rhs), to 1e-6 of the
+    entries where the quartic leaves almost nothing (the saddle)."""
+    query = np.arange(0, len(surface.vertices), 7)
+    indptr, indices, inner = hop_lists(surface.faces, len(surface.vertices), query, 4)
+    m = len(query)
+    small, large, error, frame_u = (np.empty((m, 3)), np.empty((m, 3)), np.empty(m),
+                                    np.empty((m, 3)))
+    ring_jet.ring_jet(surface.vertices, query, surface.normals[query], indptr, indices, inner,
+                      small, large, error, frame_u)
+    for i, q in enumerate(query):
+        a, b, e, tu = ring_jet_spec.ring_jet(surface.vertices[q], surface.normals[q],
+                                             surface.vertices[indices[indptr[i]:indptr[i + 1]]],
+                                             inner[i])
+        scale = np.abs(a).max()
+        np.testing.assert_allclose(small[i], a, rtol=0, atol=1e-7 * scale)
+        np.testing.assert_allclose(large[i], b, rtol=0, atol=1e-7 * scale)
+        assert error[i] == pytest.approx(e, rel=1e-6, abs=1e-6 * scale)
+        np.testing.assert_allclose(frame_u[i], tu, atol=1e-15)
+
+
+def test_ring_jet_is_exact_on_a_quartic_height_field_and_says_so():
+    """Heights along a fixed axis z of the graph z = f(x, y), f a quartic, are a quartic in
+    any frame about that axis: with the normal e_z given at every vertex of a random
+    sampling, both supports give the graph's exact principal curvatures (from its gradient
+    and Hessian, the tilt of the frame included) at every interior vertex to round-off (1e-9
+    of k: measured 1e-12), with a standard error of round-off size: the kernel forms the
+    residual sum as sum h^2 - c . rhs, whose cancellation leaves ~1e-14 of sum h^2, i.e. a
+    standard error of ~1e-6 of k (measured 1.4e-6 of the largest |k|), below 1e-5."""
+    rng = np.random.default_rng(3)
+    xy = rng.uniform(-1.5, 1.5, size=(3000, 2))
+    x, y = xy.T
+    c = np.array([0.3, -0.2, 0.25, 0.1, -0.05, 0.04, 0.03, -0.02, 0.02, 0.01, -0.015])
+    z = (c[0] * x * x + c[1] * x * y + c[2] * y * y + c[3] * x + c[4] * y + c[5] * x ** 3
+         + c[6] * x * y * y + c[7] * y ** 3 + c[8] * x ** 4 + c[9] * x * x * y * y
+         + c[10] * y ** 4)
+    fx = 2 * c[0] * x + c[1] * y + c[3] + 3 * c[5] * x * x + c[6] * y * y + 4 * c[8] * x ** 3 \
+        + 2 * c[9] * x * y * y
+    fy = c[1] * x + 2 * c[2] * y + c[4] + 2 * c[6] * x * y + 3 * c[7] * y * y \
+        + 2 * c[9] * x * x * y + 4 * c[10] * y ** 3
+    fxx = 2 * c[0] + 6 * c[5] * x + 12 * c[8] * x * x + 2 * c[9] * y * y
+    fxy = c[1] + 2 * c[6] * y + 4 * c[9] * x * y
+    fyy = 2 * c[2] + 2 * c[6] * x + 6 * c[7] * y + 2 * c[9] * x * x + 12 * c[10] * y * y
+    # the graph's principal curvatures along +z, convex positive (heights falling away)
+    w = np.sqrt(1 + fx * fx + fy * fy)
+    first = np.stack([np.stack([1 + fx * fx, fx * fy], -1), np.stack([fx * fy, 1 + fy * fy], -1)], -2)
+    second = -np.stack([np.stack([fxx, fxy], -1), np.stack([fxy, fyy], -1)], -2) / w[:, None, None]
+    exact = np.sort(np.linalg.eigvals(np.linalg.solve(first, second)).real, axis=1)[:, ::-1]
+    from scipy.spatial import Delaunay
+    faces = Delaunay(xy).simplices.astype(np.int64)
+    v = np.column_stack([x, y, z])
+    query = np.flatnonzero(np.abs(xy).max(axis=1) < 1.0)
+    indptr, indices, inner = hop_lists(faces, len(v), query, 4)
+    m = len(query)
+    small, large, error, frame_u = (np.empty((m, 3)), np.empty((m, 3)), np.empty(m),
+                                    np.empty((m, 3)))
+    up = np.tile([0.0, 0.0, 1.0], (m, 1))
+    ring_jet.ring_jet(v, query, up, indptr, indices, inner, small, large, error, frame_u)
+    scale = np.abs(exact[query]).max()
+    for fit in (small, large):
+        k1, k2, _, _ = jet_blend._eigen(fit)
+        np.testing.assert_allclose(k1, exact[query, 0], atol=1e-9 * scale)
+        np.testing.assert_allclose(k2, exact[query, 1], atol=1e-9 * scale)
+    assert np.nanmax(error) < 1e-5 * scale
+
+
+def test_ring_jet_gives_no_fit_where_it_cannot():
+    """NaN shape operators where the support holds fewer than MIN_ROWS points (an
+    icosahedron's 3-ring is its 11 other vertices), where the vertex or its normal is not
+    finite; neighbours with NaN coordinates are passed over."""
+    ico = surfaces.sphere(1.0, 0)
+    v = ico.vertices.copy()
+    indptr, indices, inner = hop_lists(ico.faces, len(v), np.arange(len(v)), 4)
+    m = len(v)
+    out = (np.empty((m, 3)), np.empty((m, 3)), np.empty(m), np.empty((m, 3)))
+    ring_jet.ring_jet(v, np.arange(m, dtype=np.int64), ico.normals, indptr, indices, inner, *out)
+    assert np.isnan(out[0]).all() and np.isnan(out[2]).all()
+
+    s = surfaces.ellipsoid((2.0, 1.5, 1.0), 3)
+    v = s.vertices.copy()
+    query = np.arange(len(v), dtype=np.int64)
+    normals = s.normals.copy()
+    normals[0] = np.nan
+    v[1] = np.nan
+    indptr, indices, inner = hop_lists(s.faces, len(v), query, 4)
+    m = len(v)
+    out = (np.empty((m, 3)), np.empty((m, 3)), np.empty(m), np.empty((m, 3)))
+    ring_jet.ring_jet(v, query, normals, indptr, indices, inner, *out)
+    assert np.isnan(out[0][:2]).all() and np.isnan(out[3][:2]).all()
+    assert np.isfinite(out[0][2:]).all()
+    # a neighbour of vertex 1 skips it and still fits
+    near = indices[indptr[2]:indptr[3]]
+    assert 1 in near or np.isfinite(out[0][2]).all()
+
+
+def test_blend_takes_the_jet_on_a_clean_ellipsoid_and_nothing_under_noise():
+    """A clean ellipsoid 3 / 1 / 0.5 (10242 vertices), whose curvature (up to 12) varies across
+    the default balls: mean |dk| falls to less than 0.6 of the circle fits' (measured 0.0156
+    -> 0.0071, 0.45x); a torus with 0.1 % noise along the normal keeps every row's bits (the
+    jet over 37 points is the noisier estimate there); the blend's weights are in [0, 1]."""
+    s = surfaces.ellipsoid((3.0, 1.0, 0.5), 5)
+    plain = meshcurv.principal_curvatures(s.vertices, s.faces, ring_jet=False)
+    blended = jet_blend.blend(plain, s.vertices, s.faces, np.arange(len(s.vertices)))
+    w = blended.jet_share
+    dk = lambda r: np.mean((np.abs(r.k1 - s.k1) + np.abs(r.k2 - s.k2)) / 2)
+    assert dk(blended) < 0.6 * dk(plain)
+    assert w.min() >= 0.0 and w.max() <= 1.0 and (w > 0.5).mean() > 0.4      # measured 0.57
+    kept = w == 0.0
+    assert np.array_equal(blended.k1[kept], plain.k1[kept])
+    assert np.array_equal(blended.d1[kept], plain.d1[kept])
+    # directions stay an orthonormal frame with the normal (d2 = n x d1)
+    np.testing.assert_allclose(np.cross(blended.normals, blended.d1), blended.d2, atol=1e-12)
+    assert np.all(blended.k1 >= blended.k2)
+
+    t = surfaces.add_normal_noise(surfaces.torus(2.0, 0.5, 120, 30), 0.001, seed=1)
+    noisy = meshcurv.principal_curvatures(t.vertices, t.faces, ring_jet=False)
+    again = jet_blend.blend(noisy, t.vertices, t.faces, np.arange(len(t.vertices)))
+    assert not again.jet_share.any()
+    for name in ("k1", "k2", "d1", "d2", "normals"):
+        assert getattr(again, name) is getattr(noisy, name)
+
+
+def test_the_default_radius_takes_the_jets_a_given_radius_does_not():
+    """``ring_jet`` is on at the default radius and with "auto" (the default equals the
+    blend applied to ``ring_jet=False``), off for a given radius (the same bits with the
+    switch on and off); clouds take their points' nearest neighbours."""
+    s = surfaces.ellipsoid((2.0, 1.5, 1.0), 3)
+    v, f = s.vertices, s.faces
+    on = meshcurv.principal_curvatures(v, f)
+    off = meshcurv.principal_curvatures(v, f, ring_jet=False)
+    expected = jet_blend.blend(off, v, f, np.arange(len(v)))
+    assert expected.jet_share.any() and off.jet_share is None
+    for name in ("k1", "k2", "d1", "d2", "normals", "jet_share"):
+        assert np.array_equal(getattr(on, name), getattr(expected, name))
+    given = [meshcurv.principal_curvatures(v, f, radius=0.5, ring_jet=flag) for flag in (True, False)]
+    assert np.array_equal(given[0].k1, given[1].k1) and given[0].jet_share is None
+    cloud = meshcurv.principal_curvatures(v)
+    plain = meshcurv.principal_curvatures(v, ring_jet=False)
+    dk = lambda r: np.mean((np.abs(r.k1 - s.k1) + np.abs(r.k2 - s.k2)) / 2)
+    assert dk(cloud) < 0.95 * dk(plain)      # measured 0.034 -> 0.030
+
+
+def test_cloud_lists_skip_points_that_are_not_finite_and_small_clouds():
+    """The nearest-neighbour lists of a cloud with a NaN point (no list for it, never a
+    neighbour) and of a cloud smaller than the larger support."""
+    rng = np.random.default_rng(0)
+    p = rng.normal(size=(2000, 3))
+    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    p[3] = np.nan
+    rows = np.arange(len(p))
+    small, large, error, tu = jet_blend.ring_jets(p, None, rows, p)
+    assert np.isnan(small[3]).all() and np.isfinite(small[rows != 3]).all()
+    # a unit sphere's caps of 37 points (about 16 degrees): k = 1 to the quartic's error
+    k1, k2, _, _ = jet_blend._eigen(small[rows != 3])
+    np.testing.assert_allclose(np.concatenate([k1, k2]), 1.0, atol=0.01)
+    few = p[:40][np.isfinite(p[:40]).all(axis=1)]
+    small, large, _, _ = jet_blend.ring_jets(few, None, np.arange(len(few)), few)
+    assert np.isfinite(small).all() and np.isfinite(large).all()
+
+
+@pytest.mark.parametrize("faces", [True, False])
+def test_rows_of_a_query_and_of_a_scaled_input_equal_the_whole_runs(faces):
+    """The jets are row-local: the rows of a ``query`` equal the whole run's; on coordinates
+    scaled by 2^-700 and 2^600 (squares of the supports' sizes under- and overflow) the
+    rows are the unit-scale run's scaled, bit for bit."""
+    s = surfaces.ellipsoid((2.0, 1.5, 1.0), 3)
+    f = s.faces if faces else None
+    whole = meshcurv.principal_curvatures(s.vertices, f)
+    assert (whole.jet_share > 0).mean() > 0.05       # measured 0.13 (mesh), 0.07 (points)
+    rows = np.arange(3, len(s.vertices), 11)
+    part = meshcurv.principal_curvatures(s.vertices, f, query=rows)
+    for name in ("k1", "k2", "d1", "d2", "jet_share"):
+        assert np.array_equal(getattr(part, name), getattr(whole, name)[rows])
+    for unit in (2.0 ** -700, 2.0 ** 600):
+        scaled = meshcurv.principal_curvatures(s.vertices * unit, f)
+        assert np.array_equal(scaled.k1 * unit, whole.k1)
+        assert np.array_equal(scaled.d1, whole.d1)
+        assert np.array_equal(scaled.jet_share, whole.jet_share)

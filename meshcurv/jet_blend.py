@@ -43,6 +43,7 @@ import numpy as np
 
 from .fit import ring_jet as ring_jet_kernel
 from .neighbors import kring, power_of_two_scale
+from .neighbors.grid import spatial_order
 from .pipeline import BLOCK
 from .result import Status
 
@@ -56,18 +57,22 @@ MESH_RINGS = 4
 CLOUD_NEIGHBORS = (36, 60)
 
 
-def ring_jets(v, f, query, normals, unit=1.0, block=BLOCK):
+def ring_jets(v, f, query, normals, unit=1.0, cell=None, block=BLOCK):
     """The ring jets at the vertices ``query`` ((m,) int64 rows of ``v`` (n, 3)) along their
     unit ``normals`` (m, 3): ``(small, large, error, frame_u)`` as
     :func:`meshcurv.fit.ring_jet.ring_jet` gives them, over each vertex's 3- and 4-ring of the
     faces ``f`` or, without faces (None), its :data:`CLOUD_NEIGHBORS` nearest points; of
     ``v * unit`` (a power of two that keeps the squares of the supports' sizes in float64,
     :func:`meshcurv.neighbors.power_of_two_scale`): curvatures in units of ``1 / unit``
-    model units."""
+    model units. A cloud's rows are searched and fitted grid cell by grid cell of edge
+    ``cell`` (scaled units; None: in their order), which keeps each block's neighbours in
+    cache (300k random-order points: the k-d tree's queries 1.7 -> 1.1 s); each row's
+    result is its own whatever the order."""
     m = len(query)
     small, large = np.empty((m, 3)), np.empty((m, 3))
     error, frame_u = np.empty(m), np.empty((m, 3))
     points = np.ascontiguousarray(np.asarray(v, dtype=np.float64) * unit)
+    order = np.arange(m)
     if f is not None:
         adjacency = kring.edge_adjacency(f, len(v))
         work = kring.KringWork(len(v))
@@ -76,17 +81,22 @@ def ring_jets(v, f, query, normals, unit=1.0, block=BLOCK):
 
         finite = np.flatnonzero(np.isfinite(points).all(axis=1))
         tree = cKDTree(points[finite]) if len(finite) > 1 else None
+        if cell is not None:
+            order = spatial_order(points[query], cell)
     for lo in range(0, m, block):
-        rows = query[lo:lo + block]
+        at = order[lo:lo + block]
+        rows = query[at]
         if f is not None:
             indptr, indices, inner = kring.hop_rings(
                 adjacency[0], adjacency[1], rows, MESH_RINGS, work.stamp, work.queue,
                 work.take_tags(len(rows)))
         else:
             indptr, indices, inner = _nearest(points, finite, tree, rows)
-        sl = slice(lo, lo + len(rows))
-        ring_jet_kernel.ring_jet(points, rows, np.ascontiguousarray(normals[sl]), indptr,
-                                 indices, inner, small[sl], large[sl], error[sl], frame_u[sl])
+        out = (np.empty((len(at), 3)), np.empty((len(at), 3)), np.empty(len(at)),
+               np.empty((len(at), 3)))
+        ring_jet_kernel.ring_jet(points, rows, np.ascontiguousarray(normals[at]), indptr,
+                                 indices, inner, *out)
+        small[at], large[at], error[at], frame_u[at] = out
     return small, large, error, frame_u
 
 
@@ -125,7 +135,8 @@ def blend(result, v, f, query):
     # in the units of coordinates scaled by a power of two (exact), where the shape
     # operators' squares stay in float64 whatever the input's scale
     unit = power_of_two_scale(result.radius)
-    small, large, error, tu = ring_jets(v, f, np.asarray(query)[rows], n, unit)
+    small, large, error, tu = ring_jets(v, f, np.asarray(query)[rows], n, unit,
+                                        result.radius * unit)
     tv = np.cross(n, tu)
     circles = _in_frame(result.k1[rows] / unit, result.k2[rows] / unit, result.d1[rows], tu,
                         tv)

@@ -297,13 +297,13 @@ class Options:
         At the default radius and with ``radius="auto"`` (a radius given is kept), each
         valid row's curvature moves towards that of a quartic height fit over the vertex's
         3-ring (a cloud point's 36 nearest) where that fit is measurably the more accurate:
-        where it differs from the circle fits by more than twice its expected error (its
-        standard error and its change to the 4-ring), by the part beyond
-        (:mod:`meshcurv.jet_blend`). Clean ellipsoid meshes, mean |dk|: 3 / 1 / 0.5 of
-        2562 / 10242 vertices 0.096 / 0.016 -> 0.026 / 0.0039, MeshLab's 2 % decimation of
-        2 / 1.5 / 1 0.047 -> 0.021; random egg crate and saddle 0.0012 / 0.0005 -> 0.00002 /
-        0.00001; noisy data keep the circle fits (README). False: the circle fits (and MLS
-        blend) alone.
+        where it differs from the circle fits by more than twice its expected error (the most
+        its residuals could move it, and its change to the 4-ring), by the part beyond
+        (:mod:`meshcurv.jet_blend`; ``result.jet_share``). Clean ellipsoid meshes, mean
+        |dk|: 3 / 1 / 0.5 of 2562 / 10242 vertices 0.096 / 0.016 -> 0.044 / 0.0071; 20k
+        random vertices of an egg crate and a saddle 0.0012 / 0.0005 -> 0.00001 / 0.000001;
+        noisy data keep the circle fits' bits (README, step 10). False: the circle fits (and
+        MLS blend) alone.
 
     Examples
     --------

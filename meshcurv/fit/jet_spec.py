@@ -5,7 +5,16 @@ import numpy as np
 
 from .constants import NOISE_SCALE
 
-__all__ = ["local_jet"]
+__all__ = ["local_jet", "tangent_frame"]
+
+
+def tangent_frame(n):
+    """``(tu, tv)``: unit tangents at the unit normal n (3,), tu = e_x x n (e_y x n where
+    |n_x| >= 0.9) normalised, tv = n x tu (the kernels' :func:`meshcurv.linalg.normal_frame`)."""
+    a = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    tu = np.cross(a, n)
+    tu /= np.linalg.norm(tu)
+    return tu, np.cross(n, tu)
 
 
 def local_jet(x, n, neighbors, radius, point_weights=None):
@@ -34,10 +43,7 @@ def local_jet(x, n, neighbors, radius, point_weights=None):
     """
     x = np.asarray(x, dtype=np.float64)
     n = np.asarray(n, dtype=np.float64)
-    a = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    tu = np.cross(a, n)
-    tu /= np.linalg.norm(tu)
-    tv = np.cross(n, tu)
+    tu, tv = tangent_frame(n)
     q = np.asarray(neighbors, dtype=np.float64) - x
     d2 = np.einsum("ij,ij->i", q, q)
     pw = np.ones(len(q)) if point_weights is None else np.asarray(point_weights, float)

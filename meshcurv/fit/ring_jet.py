@@ -15,7 +15,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from ..linalg import CHUNK, inverse_entry, solve_sym
+from ..linalg import CHUNK, inverse_entry, normal_frame, solve_sym
 from .jet import _JET_U, _JET_V, _QUARTIC, _add_monomials
 
 __all__ = ["ring_jet", "MIN_ROWS", "ROUNDING"]
@@ -25,6 +25,21 @@ __all__ = ["ring_jet", "MIN_ROWS", "ROUNDING"]
 MIN_ROWS = 18
 # Half a unit in the last place: the stored coordinates' rounding, relative to their size.
 ROUNDING = 2.0 ** -53
+
+
+@njit(cache=True)
+def _in_frame(points, k, s, x0, x1, x2, inv, frame):
+    """``(usable, u, v, h)``: the offset of ``points[k]`` from x = (x0, x1, x2) times ``inv``
+    in the frame's rows (tu, tv, n); not usable where k is x's own row ``s`` or the offset is
+    not finite."""
+    d0 = (points[k, 0] - x0) * inv
+    d1 = (points[k, 1] - x1) * inv
+    d2 = (points[k, 2] - x2) * inv
+    if k == s or not np.isfinite(d0 + d1 + d2):
+        return False, 0.0, 0.0, 0.0
+    return (True, d0 * frame[0, 0] + d1 * frame[0, 1] + d2 * frame[0, 2],
+            d0 * frame[1, 0] + d1 * frame[1, 1] + d2 * frame[1, 2],
+            d0 * frame[2, 0] + d1 * frame[2, 1] + d2 * frame[2, 2])
 
 
 @njit(cache=True)
@@ -108,6 +123,7 @@ def ring_jet(points, query, normals, indptr, indices, inner, small, large, error
         y = np.empty(_QUARTIC)
         mom = np.empty((9, 9))
         hmom = np.empty((9, 9))
+        frame = np.empty((3, 3))
         for q in range(c * CHUNK, min(m, (c + 1) * CHUNK)):
             for a in range(3):
                 small[q, a] = np.nan
@@ -120,18 +136,9 @@ def ring_jet(points, query, normals, indptr, indices, inner, small, large, error
             if not np.isfinite(n0 + n1 + n2 + x0 + x1 + x2):
                 continue
             # any tangent frame: the polynomial basis is closed under rotations about n
-            if abs(n0) < 0.9:
-                t0, t1, t2 = 0.0, -n2, n1          # e_x cross n
-            else:
-                t0, t1, t2 = n2, 0.0, -n0          # e_y cross n
-            f = 1.0 / math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
-            t0 *= f
-            t1 *= f
-            t2 *= f
-            b0 = n1 * t2 - n2 * t1
-            b1 = n2 * t0 - n0 * t2
-            b2 = n0 * t1 - n1 * t0
-            frame_u[q, 0], frame_u[q, 1], frame_u[q, 2] = t0, t1, t2
+            normal_frame(n0, n1, n2, frame)
+            for a in range(3):
+                frame_u[q, a] = frame[0, a]
             lo = indptr[q]
             mid = lo + inner[q]
             hi = indptr[q + 1]
@@ -158,14 +165,9 @@ def ring_jet(points, query, normals, indptr, indices, inner, small, large, error
             for part in range(2):
                 for j in range(lo if part == 0 else mid, mid if part == 0 else hi):
                     k = indices[j]
-                    d0 = (points[k, 0] - x0) * inv
-                    d1 = (points[k, 1] - x1) * inv
-                    d2 = (points[k, 2] - x2) * inv
-                    if k == s or not np.isfinite(d0 + d1 + d2):
+                    usable, u, v, h = _in_frame(points, k, s, x0, x1, x2, inv, frame)
+                    if not usable:
                         continue
-                    u = d0 * t0 + d1 * t1 + d2 * t2
-                    v = d0 * b0 + d1 * b1 + d2 * b2
-                    h = d0 * n0 + d1 * n1 + d2 * n2
                     _add_monomials(mom, 1.0, u, v, 8)
                     _add_monomials(hmom, h, u, v, 4)
                     rows += 1
@@ -185,17 +187,10 @@ def ring_jet(points, query, normals, indptr, indices, inner, small, large, error
                 # the fit is close), each at least the rounding of the stored coordinates
                 rss = sol[5] * sol[5]                # x itself
                 for j in range(lo, mid):
-                    k = indices[j]
-                    d0 = (points[k, 0] - x0) * inv
-                    d1 = (points[k, 1] - x1) * inv
-                    d2 = (points[k, 2] - x2) * inv
-                    if k == s or not np.isfinite(d0 + d1 + d2):
-                        continue
-                    u = d0 * t0 + d1 * t1 + d2 * t2
-                    v = d0 * b0 + d1 * b1 + d2 * b2
-                    h = d0 * n0 + d1 * n1 + d2 * n2
-                    r = h - _quartic_at(sol, u, v)
-                    rss += r * r
+                    usable, u, v, h = _in_frame(points, indices[j], s, x0, x1, x2, inv, frame)
+                    if usable:
+                        r = h - _quartic_at(sol, u, v)
+                        rss += r * r
                 rounding = ROUNDING * max(abs(x0), abs(x1), abs(x2)) * inv
                 rss += rows * rounding * rounding
                 factor = max(4.0 * inverse_entry(mat, _QUARTIC, 0, y),

@@ -3,6 +3,7 @@ over a small and a larger support around one vertex."""
 
 import numpy as np
 
+from .jet_spec import tangent_frame
 from .ring_jet import MIN_ROWS, ROUNDING
 
 __all__ = ["ring_jet", "shape_operator"]
@@ -47,10 +48,7 @@ def ring_jet(x, n, neighbors, inner):
     """
     x = np.asarray(x, dtype=np.float64)
     n = np.asarray(n, dtype=np.float64)
-    a = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    tu = np.cross(a, n)
-    tu /= np.linalg.norm(tu)
-    tv = np.cross(n, tu)
+    tu, tv = tangent_frame(n)
     d = np.asarray(neighbors, dtype=np.float64) - x
     keep = np.isfinite(d).all(axis=1) & (np.abs(d).sum(axis=1) > 0)
     first = keep & (np.arange(len(d)) < inner)

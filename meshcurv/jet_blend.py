@@ -47,7 +47,7 @@ from .neighbors.grid import spatial_order
 from .pipeline import BLOCK
 from .result import Status
 
-__all__ = ["BLEND_SIGMAS", "MESH_RINGS", "CLOUD_NEIGHBORS", "ring_jets", "blend"]
+__all__ = ["BLEND_SIGMAS", "MESH_RINGS", "CLOUD_NEIGHBORS", "MAX_RING", "ring_jets", "blend"]
 
 BLEND_SIGMAS = 2.0
 # The supports: a mesh vertex's 3-ring and 4-ring (by hops over edges), a cloud point's
@@ -55,6 +55,11 @@ BLEND_SIGMAS = 2.0
 # besides the vertex).
 MESH_RINGS = 4
 CLOUD_NEIGHBORS = (36, 60)
+# The most vertices a mesh vertex's 4-ring may hold for a jet: 16 times a regular mesh's 60.
+# Beyond, near the hub of a fan (a cylinder's cap triangulated from its centre, a UV
+# sphere's pole of many sections) the rings reach around the fan and the vertex gets no jet:
+# this bounds the lists at 1024 entries a vertex.
+MAX_RING = 1024
 
 
 def ring_jets(v, f, query, normals, unit=1.0, cell=None, block=BLOCK):
@@ -89,7 +94,7 @@ def ring_jets(v, f, query, normals, unit=1.0, cell=None, block=BLOCK):
         if f is not None:
             indptr, indices, inner = kring.hop_rings(
                 adjacency[0], adjacency[1], rows, MESH_RINGS, work.stamp, work.queue,
-                work.take_tags(len(rows)))
+                work.take_tags(len(rows)), MAX_RING)
         else:
             indptr, indices, inner = _nearest(points, finite, tree, rows)
         out = (np.empty((len(at), 3)), np.empty((len(at), 3)), np.empty(len(at)),
@@ -138,8 +143,8 @@ def blend(result, v, f, query):
     small, large, error, tu = ring_jets(v, f, np.asarray(query)[rows], n, unit,
                                         result.radius * unit)
     tv = np.cross(n, tu)
-    circles = _in_frame(result.k1[rows] / unit, result.k2[rows] / unit, result.d1[rows], tu,
-                        tv)
+    circles = _shape_in_frame(result.k1[rows] / unit, result.k2[rows] / unit, result.d1[rows],
+                              tu, tv)
     diff = small - circles
     with np.errstate(invalid="ignore", divide="ignore"):
         expected = error ** 2 + _norm2(small - large)
@@ -159,7 +164,7 @@ def blend(result, v, f, query):
     return out
 
 
-def _in_frame(k1, k2, d1, tu, tv):
+def _shape_in_frame(k1, k2, d1, tu, tv):
     """``(S_uu, S_uv, S_vv)`` (m, 3) of the shape operator with curvatures k1 >= k2 and first
     direction d1 (unit, in the plane of tu, tv) in the frame (tu, tv)."""
     c = np.einsum("ij,ij->i", d1, tu)

@@ -11,12 +11,12 @@ from meshcurv.fit import ring_jet, ring_jet_spec
 from meshcurv.neighbors import kring
 
 
-def hop_lists(faces, n, query, depth):
+def hop_lists(faces, n, query, depth, limit=jet_blend.MAX_RING):
     """The kernel's hop rings of ``query`` to ``depth`` hops, and each row's inner count."""
     adjacency = kring.edge_adjacency(faces, n)
     work = kring.KringWork(n)
     return kring.hop_rings(adjacency[0], adjacency[1], np.asarray(query, np.int64), depth,
-                           work.stamp, work.queue, 0)
+                           work.stamp, work.queue, 0, limit)
 
 
 def test_hop_rings_are_the_vertices_within_that_many_edges():
@@ -37,6 +37,26 @@ def test_hop_rings_are_the_vertices_within_that_many_edges():
         within = [set(reach[k][q].indices) - {q} for k in (3, 4)]
         assert len(row) == len(set(row)) and set(row) == within[1]
         assert set(row[:inner[i]]) == within[0]
+    # rings of more than ``limit`` vertices are left empty
+    sizes = np.diff(indptr)
+    limit = int(np.median(sizes))
+    indptr, indices, inner = hop_lists(s.faces, n, query, 4, limit)
+    assert np.array_equal(np.diff(indptr), np.where(sizes > limit, 0, sizes))
+    assert np.all(inner[sizes > limit] == 0)
+
+
+def test_the_hub_of_a_large_fan_gets_no_jet_and_costs_no_memory():
+    """A disc of 200000 triangles around one hub vertex (a cap triangulated from its centre):
+    every vertex's 4-ring is the whole fan; the rows get no jet (NaN, jet_share 0) instead of
+    lists of 200000^2 entries, and the circle fits stand."""
+    k = 200000
+    t = np.linspace(0.0, 2 * np.pi, k, endpoint=False)
+    v = np.vstack([[0.0, 0.0, 0.0], np.column_stack([np.cos(t), np.sin(t), np.zeros(k)])])
+    ring = np.arange(1, k + 1)
+    f = np.column_stack([np.zeros(k, np.int64), ring, np.roll(ring, -1)])
+    small, large, error, _ = jet_blend.ring_jets(v, f, np.arange(0, k + 1, 1000),
+                                                 np.tile([0.0, 0.0, 1.0], (k // 1000 + 1, 1)))
+    assert np.isnan(small).all() and np.isnan(error).all()
 
 
 @pytest.mark.parametrize("surface", [
@@ -93,7 +113,8 @@ def test_ring_jet_is_exact_on_a_quartic_height_field_and_says_so():
     fyy = 2 * c[2] + 2 * c[6] * x + 6 * c[7] * y + 2 * c[9] * x * x + 12 * c[10] * y * y
     # the graph's principal curvatures along +z, convex positive (heights falling away)
     w = np.sqrt(1 + fx * fx + fy * fy)
-    first = np.stack([np.stack([1 + fx * fx, fx * fy], -1), np.stack([fx * fy, 1 + fy * fy], -1)], -2)
+    first = np.stack([np.stack([1 + fx * fx, fx * fy], -1),
+                      np.stack([fx * fy, 1 + fy * fy], -1)], -2)
     second = -np.stack([np.stack([fxx, fxy], -1), np.stack([fxy, fyy], -1)], -2) / w[:, None, None]
     exact = np.sort(np.linalg.eigvals(np.linalg.solve(first, second)).real, axis=1)[:, ::-1]
     from scipy.spatial import Delaunay
@@ -182,7 +203,8 @@ def test_the_default_radius_takes_the_jets_a_given_radius_does_not():
     assert expected.jet_share.any() and off.jet_share is None
     for name in ("k1", "k2", "d1", "d2", "normals", "jet_share"):
         assert np.array_equal(getattr(on, name), getattr(expected, name))
-    given = [meshcurv.principal_curvatures(v, f, radius=0.5, ring_jet=flag) for flag in (True, False)]
+    given = [meshcurv.principal_curvatures(v, f, radius=0.5, ring_jet=flag)
+             for flag in (True, False)]
     assert np.array_equal(given[0].k1, given[1].k1) and given[0].jet_share is None
     cloud = meshcurv.principal_curvatures(v)
     plain = meshcurv.principal_curvatures(v, ring_jet=False)

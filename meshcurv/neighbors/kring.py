@@ -1,5 +1,6 @@
 """Radius-limited k-rings over mesh edges: the connected part of the ball reachable on the
-surface (never across a thin sheet). Compiled kernels (edge adjacency, breadth-first search,
+surface (never across a thin sheet); and plain k-rings, every vertex within k hops (the ring
+jets' supports, :func:`hop_rings`). Compiled kernels (edge adjacency, breadth-first search,
 the CSR lists through :mod:`meshcurv.neighbors.csr`) and their wrappers.
 """
 
@@ -264,12 +265,13 @@ def kring_ball_counts(adj_ptr, adj_idx, points, query, radius, stamp, queue, tag
 
 
 @njit(cache=True)
-def _hop_ring_one(adj_ptr, adj_idx, s, depth, tag, stamp, queue, out, base):
+def _hop_ring_one(adj_ptr, adj_idx, s, depth, tag, stamp, queue, out, base, limit):
     """Breadth-first over mesh edges from vertex ``s`` to ``depth`` hops: the vertices found
     (``s`` excluded, by hop count, then in the search's order) written to ``out[base:]`` when
     ``out`` holds them (a counting pass passes an empty one); returns ``(found, inner)``,
-    their number and how many lie within ``depth - 1`` hops. ``stamp`` marks visited vertices
-    with ``tag``, a value unique to this search."""
+    their number and how many lie within ``depth - 1`` hops; ``(0, 0)`` where more than
+    ``limit`` are found (a hub of a fan reaches the whole fan). ``stamp`` marks visited
+    vertices with ``tag``, a value unique to this search."""
     stamp[s] = tag
     queue[0] = s
     head = 0
@@ -286,6 +288,8 @@ def _hop_ring_one(adj_ptr, adj_idx, s, depth, tag, stamp, queue, out, base):
                 b = adj_idx[e]
                 if stamp[b] == tag:
                     continue
+                if tail > limit:
+                    return 0, 0
                 stamp[b] = tag
                 queue[tail] = b
                 tail += 1
@@ -296,11 +300,13 @@ def _hop_ring_one(adj_ptr, adj_idx, s, depth, tag, stamp, queue, out, base):
 
 
 @njit(parallel=True, cache=True)
-def hop_rings(adj_ptr, adj_idx, query, depth, stamp, queue, tag0):
+def hop_rings(adj_ptr, adj_idx, query, depth, stamp, queue, tag0, limit):
     """The ``depth``-ring of each query vertex over mesh edges (every vertex within ``depth``
     hops, however far): CSR ``(indptr, indices, inner)``, each row by hop count (the query
     vertex excluded) and ``inner`` (m,) int64 the entries of each row within ``depth - 1``
-    hops. Work arrays as :func:`kring_ball_csr`'s (stamps ``3 * (tag0 + qi) + {0, 1}``)."""
+    hops; an empty row where the ring holds more than ``limit`` vertices (which bounds the
+    lists' memory by ``limit`` entries a query). Work arrays as :func:`kring_ball_csr`'s
+    (stamps ``3 * (tag0 + qi) + {0, 1}``)."""
     m = query.shape[0]
     counts = np.zeros(m + 1, dtype=np.int64)
     inner = np.zeros(m, dtype=np.int64)
@@ -310,11 +316,11 @@ def hop_rings(adj_ptr, adj_idx, query, depth, stamp, queue, tag0):
         for qi in range(t * per, min(m, (t + 1) * per)):
             counts[qi + 1], inner[qi] = _hop_ring_one(adj_ptr, adj_idx, query[qi], depth,
                                                       3 * (tag0 + qi), stamp[t], queue[t],
-                                                      dummy, 0)
+                                                      dummy, 0, limit)
     indptr = np.cumsum(counts)
     indices = np.empty(indptr[m], dtype=np.int32)
     for t in prange(nthreads):
         for qi in range(t * per, min(m, (t + 1) * per)):
             _hop_ring_one(adj_ptr, adj_idx, query[qi], depth, 3 * (tag0 + qi) + 1, stamp[t],
-                          queue[t], indices, indptr[qi])
+                          queue[t], indices, indptr[qi], limit)
     return indptr, indices, inner

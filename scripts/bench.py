@@ -384,7 +384,7 @@ def stage_times(v, f, normals, radius):
     """
     import meshcurv
     from meshcurv import coarse, pipeline
-    from meshcurv.fit import fused, jet, mls, outliers, wrap
+    from meshcurv.fit import fused, jet, mls, outliers, ring_jet, wrap
     from meshcurv.neighbors import grid, kring
     from meshcurv.normals import orient, pca, sphere
 
@@ -392,7 +392,7 @@ def stage_times(v, f, normals, radius):
     # the kernels the pipeline calls from Python, by module; not those a kernel of the module
     # calls (its own or imported): numba binds them from the module's globals when it
     # compiles, where a Python wrapper does not compile
-    modules = (grid, kring, pca, sphere, orient, jet, outliers, fused, mls, wrap)
+    modules = (grid, kring, pca, sphere, orient, jet, outliers, fused, mls, wrap, ring_jet)
     originals = {}
     for module in modules:
         kernels = {name: fn for name, fn in vars(module).items() if hasattr(fn, "py_func")}

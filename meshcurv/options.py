@@ -302,8 +302,8 @@ class Options:
         (:mod:`meshcurv.jet_blend`; ``result.jet_share``). Clean ellipsoid meshes, mean
         |dk|: 3 / 1 / 0.5 of 2562 / 10242 vertices 0.096 / 0.016 -> 0.044 / 0.0071; 20k
         random vertices of an egg crate and a saddle 0.0012 / 0.0005 -> 0.00001 / 0.000001;
-        noisy data keep the circle fits' bits (README, step 10). False: the circle fits (and
-        MLS blend) alone.
+        no row of the noisy inputs checked took a jet (README, step 10). False: the circle
+        fits (and MLS blend) alone.
 
     Examples
     --------

@@ -8,37 +8,48 @@ points. A quartic height fit over a vertex's 3-ring (:mod:`meshcurv.fit.ring_jet
 point's :data:`CLOUD_NEIGHBORS` nearest) has a curvature error of the sampling's order h^3
 there, and under noise multiplies it. Each row takes
 
-    S = S_circles + w (S_jet - S_circles),   w = max(0, 1 - BLEND_SIGMAS^2 e^2 / d^2)
+    S = S_circles + w (S_jet - S_circles),   w = max(0, 1 - sigmas^2 e^2 / d^2)
 
-with d the difference of the two shape operators and e the jet's expected error: the most
-its residuals could move it (:func:`meshcurv.fit.ring_jet.ring_jet`'s ``error``, which
-holds noise and the shape's misfit alike) and its change from the 3-ring to the 4-ring (the
-share of the shape beyond the quartic that the residuals miss: trimesh's coarse tori, where
-the 3-ring turns far around the tube). With ``BLEND_SIGMAS = 1`` w is the inverse-variance
-weight of the two estimates when d^2 is the sum of their squared errors; 2 takes the jet
-only where it differs from the circle fits by more than twice its own expected error, and
+with d the difference of the two shape operators and e the jet's expected error: an error
+its residuals explain, plus its change from the small support to the larger one (the share
+of the shape beyond the quartic that the residuals miss: trimesh's coarse tori, where the
+3-ring turns far around the tube). With sigmas = 1, w is the inverse-variance weight of the
+two estimates when d^2 is the sum of their squared errors; larger margins take the jet only
+where it differs from the circle fits by more than sigmas times its own expected error, and
 then only by the part beyond: under noise d is of the order of e and the jet is passed by.
-Rows with w = 0 keep their bits.
+Rows with w = 0 keep their bits. The residuals' part and the margin depend on the support:
+
+- a mesh's 3-ring (:data:`MESH_SIGMAS` = 3): the standard error independent residuals give,
+  :func:`meshcurv.fit.ring_jet.ring_jet`'s misfit bound over sqrt(rows - 15). Rings are
+  whole, nearly symmetric about the vertex, and there the error the residuals do not show
+  is small: the actual error over that standard error had a median of 0.4-0.9 on clean
+  ellipsoid icospheres and decimated meshes and 0.7-0.9 under noise, whose 90 % quantile
+  (1.4-1.7) three standard errors clear.
+- a cloud's nearest points (:data:`CLOUD_SIGMAS` = 2): the misfit bound itself, the most
+  the residuals could move the entries were they the shape's rather than noise. A set of
+  nearest points ends where a regular grid's rows happen to end, asymmetric about the point,
+  and the jet takes up the grid's odd-order pattern, which the residuals hide: on torus
+  grids of 120 x 30 and 240 x 60 points the actual error over the standard error had a
+  median of 1.7-2.5 and a 90 % quantile of 6; with the standard error at 3 (or 4) those
+  clouds lost 1.16x and 1.32x (1.06x, 1.15x), with the bound at 1 1.06x and 1.22x.
 
 Measured once with a script (mean |dk|, circle fits -> blended, MeshLab's best on the same
 mesh in brackets; ``--accuracy-cases`` of ``scripts/compare_meshlab.py``): clean ellipsoid
-3 / 1 / 0.5 icospheres of 2562 / 10242 vertices 0.096 / 0.016 -> 0.044 / 0.0070 (QF 0.017 /
-0.0052), 2 / 1.5 / 1 of 642 / 2562 0.013 / 0.0018 -> 0.011 / 0.0017, 642 random points
-0.041 -> 0.036 (APSS 0.030), MeshLab's 2 % decimation 0.047 -> 0.044 (APSS 0.013); the
+3 / 1 / 0.5 icospheres of 2562 / 10242 vertices 0.096 / 0.016 -> 0.031 / 0.0048 (QF 0.017 /
+0.0052), 2 / 1.5 / 1 of 642 / 2562 0.013 / 0.0018 -> 0.0069 / 0.0013, 642 random points
+0.041 -> 0.034 (APSS 0.030), MeshLab's 2 % decimation 0.047 -> 0.029 (APSS 0.013); the
 benchmark clouds with exact positions, mean |dH| 0.0002-0.0006 -> 0.00012-0.00046 (their
 normals exact) and 0.0023-0.015 -> 0.00004-0.00095 (normals of sigma_xi 0.1 and 0.2: the
 jet uses positions alone); ellipsoid 3 / 2 / 1 of 5000 random points 0.017 / 0.019 ->
-0.0052 / 0.0077 (mesh / points), random monkey saddle points 0.0064 -> 0.00001; every noisy
+0.0046 / 0.0077 (mesh / points), random monkey saddle points 0.0064 -> 0.00001; every noisy
 case of the script, trimesh's coarse tori, icosahedra, spikes and terrains keep their mean
-|dk| (to 1e-9), and no row took a jet on noisy terrains, tori and ellipsoids checked one by
-one (0.1 % and 0.3 % noise, meshes and points). The
-alternatives measured: ``BLEND_SIGMAS`` 1 gained about twice as much on the clean
-ellipsoids and lost on regular grids taken as clouds (torus 120 x 30 and 240 x 60 points,
-1.06x and 1.22x: their nearest neighbours' quartic is off by the grid's own pattern, which
-neither the residuals nor the 4-ring see), 1.5 gained on every case tried; the standard
-error of independent residuals in place of the misfit bound (sqrt(rows - 15) = 4.7 times
-smaller on a 3-ring) let noise in at 2 (a terrain cloud's maximum |dk| 0.06 -> 1.7) and
-lost the 120 x 30 torus cloud 1.8x at 3.
+|dk| (to 1e-9), and no row took a jet on noisy tori, ellipsoids and egg crates (noise 0.003 %
+to 0.3 % of the diagonal, meshes and points) and the benchmark clouds with position noise
+0.1. Where the mesh rule loses: MeshLab's decimations of a torus to 20 % and 5 %, 1.01x and
+1.003x (38 and 1 rows of 2880 and 720 take a jet, the circle fits were 3x more accurate
+there). The bound at 2 on meshes too (the rule before): the ellipsoids above 0.044 / 0.0070,
+0.011 / 0.0017, 0.036, 0.044. Also measured: on clouds the standard error let noise in at 2
+(a terrain cloud's maximum |dk| 0.06 -> 1.7).
 """
 
 from dataclasses import replace
@@ -52,9 +63,14 @@ from .neighbors.grid import spatial_order
 from .pipeline import BLOCK
 from .result import Status
 
-__all__ = ["BLEND_SIGMAS", "MESH_RINGS", "CLOUD_NEIGHBORS", "MAX_RING", "ring_jets", "blend"]
+__all__ = ["MESH_SIGMAS", "CLOUD_SIGMAS", "MESH_RINGS", "CLOUD_NEIGHBORS", "MAX_RING",
+           "ring_jets", "blend"]
 
-BLEND_SIGMAS = 2.0
+# The margin of the jet's expected error its difference from the circle fits must exceed:
+# three standard errors on a mesh's rings, twice the misfit bound on a cloud's nearest points
+# (see the module's docstring).
+MESH_SIGMAS = 3.0
+CLOUD_SIGMAS = 2.0
 # The supports: a mesh vertex's 3-ring and 4-ring (by hops over edges), a cloud point's
 # nearest neighbours in the number those rings hold on a regular triangle mesh (36 and 60
 # besides the vertex).
@@ -69,7 +85,7 @@ MAX_RING = 1024
 
 def ring_jets(v, f, query, normals, unit=1.0, cell=None, block=BLOCK):
     """The ring jets at the vertices ``query`` ((m,) int64 rows of ``v`` (n, 3)) along their
-    unit ``normals`` (m, 3): ``(small, large, error, frame_u)`` as
+    unit ``normals`` (m, 3): ``(small, large, error, frame_u, rows_small)`` as
     :func:`meshcurv.fit.ring_jet.ring_jet` gives them, over each vertex's 3- and 4-ring of the
     faces ``f`` or, without faces (None), its :data:`CLOUD_NEIGHBORS` nearest points; of
     ``v * unit`` (a power of two that keeps the squares of the supports' sizes in float64,
@@ -81,6 +97,7 @@ def ring_jets(v, f, query, normals, unit=1.0, cell=None, block=BLOCK):
     m = len(query)
     small, large = np.empty((m, 3)), np.empty((m, 3))
     error, frame_u = np.empty(m), np.empty((m, 3))
+    rows_small = np.zeros(m, dtype=np.int64)
     points = np.ascontiguousarray(np.asarray(v, dtype=np.float64) * unit)
     order = np.arange(m)
     if f is not None:
@@ -101,11 +118,11 @@ def ring_jets(v, f, query, normals, unit=1.0, cell=None, block=BLOCK):
         else:
             indptr, indices, inner = _nearest(points, finite, tree, rows)
         out = (np.empty((len(at), 3)), np.empty((len(at), 3)), np.empty(len(at)),
-               np.empty((len(at), 3)))
+               np.empty((len(at), 3)), np.empty(len(at), dtype=np.int64))
         ring_jet_kernel.ring_jet(points, rows, np.ascontiguousarray(normals[at]), indptr,
                                  indices, inner, *out)
-        small[at], large[at], error[at], frame_u[at] = out
-    return small, large, error, frame_u
+        small[at], large[at], error[at], frame_u[at], rows_small[at] = out
+    return small, large, error, frame_u, rows_small
 
 
 def _nearest(points, finite, tree, rows):
@@ -142,15 +159,19 @@ def blend(result, v, f, query):
     # in the units of coordinates scaled by a power of two (exact), where the shape
     # operators' squares stay in float64 whatever the input's scale
     unit = power_of_two_scale(result.radius)
-    small, large, error, tu = ring_jets(v, f, np.asarray(query)[rows], n, unit,
-                                        result.radius * unit)
+    small, large, error, tu, fitted = ring_jets(v, f, np.asarray(query)[rows], n, unit,
+                                                result.radius * unit)
     tv = np.cross(n, tu)
     circles = _shape_in_frame(result.k1[rows] / unit, result.k2[rows] / unit, result.d1[rows],
                               tu, tv)
     diff = small - circles
     with np.errstate(invalid="ignore", divide="ignore"):
-        expected = error ** 2 + _norm2(small - large)
-        weight = np.clip(1.0 - BLEND_SIGMAS ** 2 * expected / _norm2(diff), 0.0, 1.0)
+        if f is None:
+            sigmas, expected = CLOUD_SIGMAS, error ** 2
+        else:
+            sigmas, expected = MESH_SIGMAS, error ** 2 / (fitted - ring_jet_kernel.COEFFICIENTS)
+        expected = expected + _norm2(small - large)
+        weight = np.clip(1.0 - sigmas ** 2 * expected / _norm2(diff), 0.0, 1.0)
     weight = np.where(np.isfinite(weight), weight, 0.0)
     took = weight > 0.0
     if not took.any():

@@ -54,7 +54,7 @@ def test_the_hub_of_a_large_fan_gets_no_jet_and_costs_no_memory():
     v = np.vstack([[0.0, 0.0, 0.0], np.column_stack([np.cos(t), np.sin(t), np.zeros(k)])])
     ring = np.arange(1, k + 1)
     f = np.column_stack([np.zeros(k, np.int64), ring, np.roll(ring, -1)])
-    small, large, error, _ = jet_blend.ring_jets(v, f, np.arange(0, k + 1, 1000),
+    small, large, error, _, _ = jet_blend.ring_jets(v, f, np.arange(0, k + 1, 1000),
                                                  np.tile([0.0, 0.0, 1.0], (k // 1000 + 1, 1)))
     assert np.isnan(small).all() and np.isnan(error).all()
 
@@ -74,19 +74,20 @@ def test_ring_jet_matches_its_numpy_specification(surface):
     query = np.arange(0, len(surface.vertices), 7)
     indptr, indices, inner = hop_lists(surface.faces, len(surface.vertices), query, 4)
     m = len(query)
-    small, large, error, frame_u = (np.empty((m, 3)), np.empty((m, 3)), np.empty(m),
-                                    np.empty((m, 3)))
+    small, large, error, frame_u, rows = (np.empty((m, 3)), np.empty((m, 3)), np.empty(m),
+                                          np.empty((m, 3)), np.empty(m, dtype=np.int64))
     ring_jet.ring_jet(surface.vertices, query, surface.normals[query], indptr, indices, inner,
-                      small, large, error, frame_u)
+                      small, large, error, frame_u, rows)
     for i, q in enumerate(query):
-        a, b, e, tu = ring_jet_spec.ring_jet(surface.vertices[q], surface.normals[q],
-                                             surface.vertices[indices[indptr[i]:indptr[i + 1]]],
-                                             inner[i])
+        a, b, e, tu, count = ring_jet_spec.ring_jet(
+            surface.vertices[q], surface.normals[q],
+            surface.vertices[indices[indptr[i]:indptr[i + 1]]], inner[i])
         scale = np.abs(a).max()
         np.testing.assert_allclose(small[i], a, rtol=0, atol=1e-7 * scale)
         np.testing.assert_allclose(large[i], b, rtol=0, atol=1e-7 * scale)
         assert error[i] == pytest.approx(e, rel=1e-6, abs=1e-6 * scale)
         np.testing.assert_allclose(frame_u[i], tu, atol=1e-15)
+        assert rows[i] == count
 
 
 def test_ring_jet_is_exact_on_a_quartic_height_field_and_says_so():
@@ -123,10 +124,10 @@ def test_ring_jet_is_exact_on_a_quartic_height_field_and_says_so():
     query = np.flatnonzero(np.abs(xy).max(axis=1) < 1.0)
     indptr, indices, inner = hop_lists(faces, len(v), query, 4)
     m = len(query)
-    small, large, error, frame_u = (np.empty((m, 3)), np.empty((m, 3)), np.empty(m),
-                                    np.empty((m, 3)))
+    small, large, error, frame_u, rows = (np.empty((m, 3)), np.empty((m, 3)), np.empty(m),
+                                          np.empty((m, 3)), np.empty(m, dtype=np.int64))
     up = np.tile([0.0, 0.0, 1.0], (m, 1))
-    ring_jet.ring_jet(v, query, up, indptr, indices, inner, small, large, error, frame_u)
+    ring_jet.ring_jet(v, query, up, indptr, indices, inner, small, large, error, frame_u, rows)
     scale = np.abs(exact[query]).max()
     for fit in (small, large):
         k1, k2, _, _ = jet_blend._eigen(fit)
@@ -143,9 +144,10 @@ def test_ring_jet_gives_no_fit_where_it_cannot():
     v = ico.vertices.copy()
     indptr, indices, inner = hop_lists(ico.faces, len(v), np.arange(len(v)), 4)
     m = len(v)
-    out = (np.empty((m, 3)), np.empty((m, 3)), np.empty(m), np.empty((m, 3)))
+    out = (np.empty((m, 3)), np.empty((m, 3)), np.empty(m), np.empty((m, 3)),
+           np.empty(m, dtype=np.int64))
     ring_jet.ring_jet(v, np.arange(m, dtype=np.int64), ico.normals, indptr, indices, inner, *out)
-    assert np.isnan(out[0]).all() and np.isnan(out[2]).all()
+    assert np.isnan(out[0]).all() and np.isnan(out[2]).all() and (out[4] == 0).all()
 
     s = surfaces.ellipsoid((2.0, 1.5, 1.0), 3)
     v = s.vertices.copy()
@@ -155,7 +157,8 @@ def test_ring_jet_gives_no_fit_where_it_cannot():
     v[1] = np.nan
     indptr, indices, inner = hop_lists(s.faces, len(v), query, 4)
     m = len(v)
-    out = (np.empty((m, 3)), np.empty((m, 3)), np.empty(m), np.empty((m, 3)))
+    out = (np.empty((m, 3)), np.empty((m, 3)), np.empty(m), np.empty((m, 3)),
+           np.empty(m, dtype=np.int64))
     ring_jet.ring_jet(v, query, normals, indptr, indices, inner, *out)
     assert np.isnan(out[0][:2]).all() and np.isnan(out[3][:2]).all()
     assert np.isfinite(out[0][2:]).all()
@@ -166,16 +169,18 @@ def test_ring_jet_gives_no_fit_where_it_cannot():
 
 def test_blend_takes_the_jet_on_a_clean_ellipsoid_and_nothing_under_noise():
     """A clean ellipsoid 3 / 1 / 0.5 (10242 vertices), whose curvature (up to 12) varies across
-    the default balls: mean |dk| falls to less than 0.6 of the circle fits' (measured 0.0156
-    -> 0.0071, 0.45x); a torus with 0.1 % noise along the normal keeps every row's bits (the
-    jet over 37 points is the noisier estimate there); the blend's weights are in [0, 1]."""
+    the default balls: mean |dk| falls to less than 0.45 of the circle fits' (measured 0.0156
+    -> 0.0048, 0.31x; 0.45x under the bound of the clouds' rule); a torus with 0.1 % noise
+    along the normal and an ellipsoid with 0.003 % keep every row's bits (the jet over 37
+    points is the noisier estimate there: three of its standard errors clear its difference
+    from the circle fits); the blend's weights are in [0, 1]."""
     s = surfaces.ellipsoid((3.0, 1.0, 0.5), 5)
     plain = meshcurv.principal_curvatures(s.vertices, s.faces, ring_jet=False)
     blended = jet_blend.blend(plain, s.vertices, s.faces, np.arange(len(s.vertices)))
     w = blended.jet_share
     dk = lambda r: np.mean((np.abs(r.k1 - s.k1) + np.abs(r.k2 - s.k2)) / 2)
-    assert dk(blended) < 0.6 * dk(plain)
-    assert w.min() >= 0.0 and w.max() <= 1.0 and (w > 0.5).mean() > 0.4      # measured 0.57
+    assert dk(blended) < 0.45 * dk(plain)
+    assert w.min() >= 0.0 and w.max() <= 1.0 and (w > 0.5).mean() > 0.6      # measured 0.81
     kept = w == 0.0
     assert np.array_equal(blended.k1[kept], plain.k1[kept])
     assert np.array_equal(blended.d1[kept], plain.d1[kept])
@@ -183,12 +188,13 @@ def test_blend_takes_the_jet_on_a_clean_ellipsoid_and_nothing_under_noise():
     np.testing.assert_allclose(np.cross(blended.normals, blended.d1), blended.d2, atol=1e-12)
     assert np.all(blended.k1 >= blended.k2)
 
-    t = surfaces.add_normal_noise(surfaces.torus(2.0, 0.5, 120, 30), 0.001, seed=1)
-    noisy = meshcurv.principal_curvatures(t.vertices, t.faces, ring_jet=False)
-    again = jet_blend.blend(noisy, t.vertices, t.faces, np.arange(len(t.vertices)))
-    assert not again.jet_share.any()
-    for name in ("k1", "k2", "d1", "d2", "normals"):
-        assert getattr(again, name) is getattr(noisy, name)
+    for t in (surfaces.add_normal_noise(surfaces.torus(2.0, 0.5, 120, 30), 0.001, seed=1),
+              surfaces.add_normal_noise(surfaces.ellipsoid((2.0, 1.5, 1.0), 4), 3e-5, seed=1)):
+        noisy = meshcurv.principal_curvatures(t.vertices, t.faces, ring_jet=False)
+        again = jet_blend.blend(noisy, t.vertices, t.faces, np.arange(len(t.vertices)))
+        assert not again.jet_share.any()
+        for name in ("k1", "k2", "d1", "d2", "normals"):
+            assert getattr(again, name) is getattr(noisy, name)
 
 
 def test_the_default_radius_takes_the_jets_a_given_radius_does_not():
@@ -220,13 +226,13 @@ def test_cloud_lists_skip_points_that_are_not_finite_and_small_clouds():
     p /= np.linalg.norm(p, axis=1, keepdims=True)
     p[3] = np.nan
     rows = np.arange(len(p))
-    small, large, error, tu = jet_blend.ring_jets(p, None, rows, p)
+    small, large, error, tu, _ = jet_blend.ring_jets(p, None, rows, p)
     assert np.isnan(small[3]).all() and np.isfinite(small[rows != 3]).all()
     # a unit sphere's caps of 37 points (about 16 degrees): k = 1 to the quartic's error
     k1, k2, _, _ = jet_blend._eigen(small[rows != 3])
     np.testing.assert_allclose(np.concatenate([k1, k2]), 1.0, atol=0.01)
     few = p[:40][np.isfinite(p[:40]).all(axis=1)]
-    small, large, _, _ = jet_blend.ring_jets(few, None, np.arange(len(few)), few)
+    small, large, _, _, _ = jet_blend.ring_jets(few, None, np.arange(len(few)), few)
     assert np.isfinite(small).all() and np.isfinite(large).all()
 
 

@@ -18,7 +18,10 @@ from numba import njit, prange
 from ..linalg import CHUNK, inverse_entry, normal_frame, solve_sym
 from .jet import _JET_U, _JET_V, _QUARTIC, _add_monomials
 
-__all__ = ["ring_jet", "MIN_ROWS", "ROUNDING"]
+__all__ = ["ring_jet", "COEFFICIENTS", "MIN_ROWS", "ROUNDING"]
+
+# The quartic's coefficients.
+COEFFICIENTS = _QUARTIC
 
 # Fewest points (the vertex included) of a support: the quartic's 15 coefficients and 3
 # degrees of freedom for its residual (the standard error needs some).
@@ -83,7 +86,8 @@ def _shape_operator(sol, inv_scale, out, q):
 
 
 @njit(parallel=True, cache=True)
-def ring_jet(points, query, normals, indptr, indices, inner, small, large, error, frame_u):
+def ring_jet(points, query, normals, indptr, indices, inner, small, large, error, frame_u,
+             rows_small):
     """Quartic height fits around each query vertex over two nested supports.
 
     In a frame (tu, tv, n) at x = ``points[query[q]]``, the heights along n of x and of its
@@ -113,6 +117,9 @@ def ring_jet(points, query, normals, indptr, indices, inner, small, large, error
         cap, a clump) the jet is no more exact than they are
     frame_u : (m, 3) float64 output, tu (unit, normal to n; tv = n x tu); NaN where x or n
         is not finite
+    rows_small : (m,) int64 output, the points of the small fit (x included): ``error``
+        over ``sqrt(rows_small - 15)`` is the standard error independent noise would give;
+        0 where there is no small fit
     """
     m = query.shape[0]
     nchunks = (m + CHUNK - 1) // CHUNK
@@ -130,6 +137,7 @@ def ring_jet(points, query, normals, indptr, indices, inner, small, large, error
                 large[q, a] = np.nan
                 frame_u[q, a] = np.nan
             error[q] = np.nan
+            rows_small[q] = 0
             s = query[q]
             x0, x1, x2 = points[s, 0], points[s, 1], points[s, 2]
             n0, n1, n2 = normals[q, 0], normals[q, 1], normals[q, 2]
@@ -197,3 +205,4 @@ def ring_jet(points, query, normals, indptr, indices, inner, small, large, error
                              inverse_entry(mat, _QUARTIC, 1, y),
                              4.0 * inverse_entry(mat, _QUARTIC, 2, y))
                 error[q] = math.sqrt(rss * factor) * inv
+                rows_small[q] = rows

@@ -45,6 +45,7 @@ def ring_jet(x, n, neighbors, inner):
         ``sqrt(RSS * (A^T A)^-1_kk)``, times 2 for S_uu and S_vv, each residual at least
         ``ROUNDING * max|x_i|``
     tu : (3,) float, the frame's first tangent (e_x x n, or e_y x n where |n_x| >= 0.9)
+    rows : int, the points of the small fit (x included; 0 where it is not fitted)
     """
     x = np.asarray(x, dtype=np.float64)
     n = np.asarray(n, dtype=np.float64)
@@ -54,8 +55,9 @@ def ring_jet(x, n, neighbors, inner):
     first = keep & (np.arange(len(d)) < inner)
     small = large = np.full(3, np.nan)
     error = np.nan
+    rows = 0
     if first.sum() + 1 < MIN_ROWS:
-        return small, large, error, tu
+        return small, large, error, tu, rows
     scale = np.sqrt(np.mean(np.sum(d[first] ** 2, axis=1)))
     for support in (first, keep):
         p = np.vstack([np.zeros(3), d[support] / scale])
@@ -75,4 +77,5 @@ def ring_jet(x, n, neighbors, inner):
         rss = np.sum((h - design @ coef) ** 2) + len(p) * rounding ** 2
         factor = np.linalg.inv(gram).diagonal()[:3] * np.array([4.0, 1.0, 4.0])
         error = np.sqrt(rss * factor.max()) / scale
-    return small, large, error, tu
+        rows = len(p)
+    return small, large, error, tu, rows

@@ -8,7 +8,10 @@ differ), and a 1M-point cloud (uniform random points on a torus, no faces). Radi
 - ``meshcurv``: exact normals given; ``meshcurv (est.)``: normals estimated by PCA over the
   neighbourhood (k-ring on meshes, ball on the cloud), refined by the local fit and oriented
   (by the faces on meshes, by minimum-spanning-tree propagation on the cloud). Everything
-  else at the library's defaults.
+  else at the library's defaults. Both at the radius above, given as a number, as MeshLab
+  gets it; ``meshcurv (default radius)``: exact normals given and no radius, the call a user
+  types, which picks its own radius (default_radius with the faces on meshes) and ends with
+  the steps only a radius it chose takes (:mod:`meshcurv.jet_blend`, the varying caps).
 - MeshLab ``compute_curvature_principal_directions_per_vertex`` with "Taubin approximation"
   (1-ring), "Quadric Fitting" (2-ring) and "Scale Dependent Quadric Fitting" (SDQF, ball of the
   same radius), called in this process on a ``MeshSet`` prepared beforehand.
@@ -209,8 +212,14 @@ def measure(fn, repeat):
     return float(np.median(times)), peak
 
 
+# The user's call: normals given, the radius meshcurv picks (None), so the steps that only a
+# radius it chose takes (the varying caps, the ring jets) run too.
+DEFAULT_CALL = "meshcurv (default radius)"
+
+
 def meshcurv_call(v, f, normals, radius, estimate):
-    """A closure running meshcurv with the given normals, or estimating and orienting them."""
+    """A closure running meshcurv with the given normals, or estimating and orienting them;
+    ``radius`` None: meshcurv's default."""
     import meshcurv
 
     if estimate:
@@ -376,8 +385,9 @@ def stage_times(v, f, normals, radius):
     """Where the time of a meshcurv call goes: seconds per compiled kernel, and the rest.
 
     Every public compiled kernel (meshcurv.neighbors, .normals, .fit) that no other kernel
-    calls is wrapped with a timer for the duration of one call with the normals given and one
-    with them estimated; the kernels are the leaves of the pipeline (neighbour search,
+    calls is wrapped with a timer for the duration of one call with the normals given, one
+    with them estimated (both at ``radius``) and one with the normals given at meshcurv's
+    default radius (:data:`DEFAULT_CALL`); the kernels are the leaves of the pipeline (neighbour search,
     normals, orientation, circle fits, MLS surface), with the blend's ring noise (one stage:
     numpy and its own kernels), and what remains of the call's time is numpy and Python glue.
     Returns ``{mode: {stage: seconds}}``.
@@ -419,11 +429,12 @@ def stage_times(v, f, normals, radius):
     try:
         for (module, name), fn in originals.items():
             setattr(module, name, timed(name, fn))
-        for mode, kwargs in (("normals given", dict(normals=normals)),
-                             ("normals estimated", dict(normal_estimation="pca"))):
+        for mode, kwargs in (("normals given", dict(normals=normals, radius=radius)),
+                             ("normals estimated", dict(normal_estimation="pca", radius=radius)),
+                             ("default radius", dict(normals=normals))):
             spent.clear()
             t0 = time.perf_counter()
-            meshcurv.principal_curvatures(v, f, radius=radius, **kwargs)
+            meshcurv.principal_curvatures(v, f, **kwargs)
             total = time.perf_counter() - t0
             stages = dict(sorted(spent.items(), key=lambda kv: -kv[1]))
             stages["other (numpy, Python)"] = total - sum(spent.values())
@@ -462,7 +473,8 @@ def run(quick=False, repeat=3, apss_timeout=900.0, methods=None, stages=True, da
         # one call per method on the 1M sets keeps the run short; MeshLab SDQF alone takes minutes
         rep = repeat if n <= 200_000 else max(1, min(repeat, 2))
         calls = [("meshcurv", meshcurv_call(v, f, exact_normals, radius, False)),
-                 ("meshcurv (est.)", meshcurv_call(v, f, exact_normals, radius, True))]
+                 ("meshcurv (est.)", meshcurv_call(v, f, exact_normals, radius, True)),
+                 (DEFAULT_CALL, meshcurv_call(v, f, exact_normals, None, False))]
         if f is not None:
             calls += [(label, meshlab_call(v, f, radius, m)) for label, m in MESHLAB_METHODS.items()]
             igl = igl_call(v, f, radius)
@@ -472,8 +484,9 @@ def run(quick=False, repeat=3, apss_timeout=900.0, methods=None, stages=True, da
             if methods and not any(label.startswith(m) for m in methods):
                 continue
             seconds, peak = measure(fn, 1 if label == "MeshLab SDQF" and n > 200_000 else rep)
-            report["rows"].append(dict(data=name, n=n, radius=radius, method=label,
-                                       seconds=seconds, peak_bytes=peak, status="ok"))
+            report["rows"].append(dict(data=name, n=n, method=label, seconds=seconds,
+                                       radius=float("nan") if label == DEFAULT_CALL else radius,
+                                       peak_bytes=peak, status="ok"))
             _progress(report["rows"][-1])
         if f is not None and (not methods or any("MeshLab APSS".startswith(m) for m in methods)):
             seconds, peak, status = apss_in_child(v, exact_normals, radius, 1, apss_timeout)

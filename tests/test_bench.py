@@ -32,13 +32,19 @@ def test_quick_benchmark_times_meshcurv_and_meshlab_on_every_mesh(quick_report):
               if not r["data"].startswith(("cloud", "LAZ", "batch"))}
     assert meshes == {"torus 4k", "sphere 4k", "noisy torus 4k", "torus 16k", "sphere 16k"}
     for data in meshes:
-        for method in ("meshcurv", "meshcurv (est.)", "MeshLab Taubin", "MeshLab SDQF"):
+        for method in ("meshcurv", "meshcurv (est.)", "meshcurv (default radius)",
+                       "MeshLab Taubin", "MeshLab SDQF"):
             row = rows[(data, method)]
             assert row["status"] == "ok" and row["seconds"] > 0
         # APSS runs in a child process and may crash; it must still leave a row
         assert (data, "MeshLab APSS") in rows
     clouds = [r for r in report["rows"] if r["data"].startswith("cloud")]
-    assert {r["method"] for r in clouds} == {"meshcurv", "meshcurv (est.)"}
+    assert {r["method"] for r in clouds} == {"meshcurv", "meshcurv (est.)",
+                                             "meshcurv (default radius)"}
+    # the split of one call per mode, the default radius's included
+    for modes in report["stages"].values():
+        assert set(modes) == {"normals given", "normals estimated", "default radius"}
+        assert all(st["total"] > 0 for st in modes.values())
 
 
 def test_quick_benchmark_reports_ratios_memory_and_first_call(quick_report):

@@ -64,7 +64,7 @@ from .pipeline import BLOCK
 from .result import Status
 
 __all__ = ["MESH_SIGMAS", "CLOUD_SIGMAS", "MESH_RINGS", "CLOUD_NEIGHBORS", "MAX_RING",
-           "ring_jets", "blend"]
+           "ring_jets", "jet_blocks", "blend"]
 
 # The margin of the jet's expected error its difference from the circle fits must exceed:
 # three standard errors on a mesh's rings, twice the misfit bound on a cloud's nearest points
@@ -90,14 +90,24 @@ def ring_jets(v, f, query, normals, unit=1.0, cell=None, block=BLOCK):
     faces ``f`` or, without faces (None), its :data:`CLOUD_NEIGHBORS` nearest points; of
     ``v * unit`` (a power of two that keeps the squares of the supports' sizes in float64,
     :func:`meshcurv.neighbors.power_of_two_scale`): curvatures in units of ``1 / unit``
-    model units. A cloud's rows are searched and fitted grid cell by grid cell of edge
-    ``cell`` (scaled units; None: in their order), which keeps each block's neighbours in
-    cache (300k random-order points: the k-d tree's queries 1.7 -> 1.1 s); each row's
-    result is its own whatever the order."""
+    model units. ``cell`` and ``block`` as in :func:`jet_blocks`, whose blocks these are."""
     m = len(query)
     small, large = np.empty((m, 3)), np.empty((m, 3))
     error, frame_u = np.empty(m), np.empty((m, 3))
     rows_small = np.zeros(m, dtype=np.int64)
+    for at, *fits in jet_blocks(v, f, query, normals, unit, cell, block):
+        small[at], large[at], error[at], frame_u[at], rows_small[at] = fits
+    return small, large, error, frame_u, rows_small
+
+
+def jet_blocks(v, f, query, normals, unit=1.0, cell=None, block=BLOCK):
+    """:func:`ring_jets` a block of at most ``block`` rows at a time: yields ``(at, small,
+    large, error, frame_u, rows_small)``, ``at`` the block's positions in ``query`` and the
+    others its rows of :func:`ring_jets`' arrays. A cloud's rows are searched and fitted
+    grid cell by grid cell of edge ``cell`` (scaled units; None: in their order), which keeps
+    each block's neighbours in cache (300k random-order points: the k-d tree's queries 1.7
+    -> 1.1 s); each row's result is its own whatever the order."""
+    m = len(query)
     points = np.ascontiguousarray(np.asarray(v, dtype=np.float64) * unit)
     order = np.arange(m)
     if f is not None:
@@ -105,7 +115,9 @@ def ring_jets(v, f, query, normals, unit=1.0, cell=None, block=BLOCK):
         work = kring.KringWork(len(v))
     else:
         finite = np.flatnonzero(np.isfinite(points).all(axis=1))
-        tree = cKDTree(points[finite]) if len(finite) > 1 else None
+        # over the scaled points themselves where all are finite (no copy)
+        tree = None if len(finite) < 2 else cKDTree(
+            points if len(finite) == len(points) else points[finite], copy_data=False)
         if cell is not None:
             order = spatial_order(points[query], cell)
     for lo in range(0, m, block):
@@ -121,8 +133,7 @@ def ring_jets(v, f, query, normals, unit=1.0, cell=None, block=BLOCK):
                np.empty((len(at), 3)), np.empty(len(at), dtype=np.int64))
         ring_jet_kernel.ring_jet(points, rows, np.ascontiguousarray(normals[at]), indptr,
                                  indices, inner, *out)
-        small[at], large[at], error[at], frame_u[at], rows_small[at] = out
-    return small, large, error, frame_u, rows_small
+        yield (at, *out)
 
 
 def _nearest(points, finite, tree, rows):
@@ -150,40 +161,46 @@ def blend(result, v, f, query):
     each valid row moved towards its ring jet's curvature by the weight w of the module's
     docstring, and w as its ``jet_share`` ((m,) in [0, 1], 0 where the row is not valid): k1,
     k2, d1 and d2 of rows with w > 0 replaced (d2 = n x d1, the normal kept), the other rows'
-    bits kept."""
+    bits kept. A block of rows at a time (:func:`jet_blocks`): beyond the outputs' copies,
+    memory for one block's fits."""
     out = replace(result, jet_share=np.zeros(len(result)))
     rows = np.flatnonzero(result.status == Status.OK)
     if not len(rows):
         return out
-    n = result.normals[rows]
     # in the units of coordinates scaled by a power of two (exact), where the shape
     # operators' squares stay in float64 whatever the input's scale
     unit = power_of_two_scale(result.radius)
-    small, large, error, tu, fitted = ring_jets(v, f, np.asarray(query)[rows], n, unit,
-                                                result.radius * unit)
-    tv = np.cross(n, tu)
-    circles = _shape_in_frame(result.k1[rows] / unit, result.k2[rows] / unit, result.d1[rows],
-                              tu, tv)
-    diff = small - circles
-    with np.errstate(invalid="ignore", divide="ignore"):
-        if f is None:
-            sigmas, expected = CLOUD_SIGMAS, error ** 2
-        else:
-            sigmas, expected = MESH_SIGMAS, error ** 2 / (fitted - ring_jet_kernel.COEFFICIENTS)
-        expected = expected + _norm2(small - large)
-        weight = np.clip(1.0 - sigmas ** 2 * expected / _norm2(diff), 0.0, 1.0)
-    weight = np.where(np.isfinite(weight), weight, 0.0)
-    took = weight > 0.0
-    if not took.any():
-        return out
-    k1, k2, c, si = _eigen(circles[took] + weight[took, None] * diff[took])
-    at = rows[took]
-    d1 = c[:, None] * tu[took] + si[:, None] * tv[took]
-    out.k1, out.k2 = result.k1.copy(), result.k2.copy()
-    out.d1, out.d2 = result.d1.copy(), result.d2.copy()
-    out.k1[at], out.k2[at], out.d1[at] = k1 * unit, k2 * unit, d1
-    out.d2[at] = np.cross(result.normals[at], d1)
-    out.jet_share[at] = weight[took]
+    copied = False
+    for at, small, large, error, tu, fitted in jet_blocks(
+            v, f, np.asarray(query)[rows], result.normals[rows], unit, result.radius * unit):
+        at = rows[at]
+        n = result.normals[at]
+        tv = np.cross(n, tu)
+        circles = _shape_in_frame(result.k1[at] / unit, result.k2[at] / unit, result.d1[at],
+                                  tu, tv)
+        diff = small - circles
+        with np.errstate(invalid="ignore", divide="ignore"):
+            if f is None:
+                sigmas, expected = CLOUD_SIGMAS, error ** 2
+            else:
+                sigmas = MESH_SIGMAS
+                expected = error ** 2 / (fitted - ring_jet_kernel.COEFFICIENTS)
+            expected = expected + _norm2(small - large)
+            weight = np.clip(1.0 - sigmas ** 2 * expected / _norm2(diff), 0.0, 1.0)
+        weight = np.where(np.isfinite(weight), weight, 0.0)
+        took = weight > 0.0
+        if not took.any():
+            continue
+        if not copied:
+            out.k1, out.k2 = result.k1.copy(), result.k2.copy()
+            out.d1, out.d2 = result.d1.copy(), result.d2.copy()
+            copied = True
+        k1, k2, c, si = _eigen(circles[took] + weight[took, None] * diff[took])
+        d1 = c[:, None] * tu[took] + si[:, None] * tv[took]
+        at = at[took]
+        out.k1[at], out.k2[at], out.d1[at] = k1 * unit, k2 * unit, d1
+        out.d2[at] = np.cross(n[took], d1)
+        out.jet_share[at] = weight[took]
     return out
 
 

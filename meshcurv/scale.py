@@ -42,6 +42,7 @@ other radii are not run: clean input costs what the default does.
 """
 
 import math
+from dataclasses import replace
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -217,7 +218,7 @@ def assemble(results, choice, base=0, at=None):
     ``results[base]``."""
     rows = np.arange(len(choice)) if at is None else np.asarray(at)
     first = results[base]
-    out = type(first)(**{f: getattr(first, f) for f in first.__dataclass_fields__})
+    out = replace(first)
     for name in ("k1", "k2", "d1", "d2", "normals", "valid", "n_neighbors", "n_samples",
                  "residual", "noise", "status", "outlier_score", "radius_used"):
         if getattr(first, name) is None:

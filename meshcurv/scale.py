@@ -48,7 +48,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from . import pipeline
-from .neighbors import power_of_two_scale, typical_extent
+from .neighbors import power_of_two_scale, scaled_for_squares
 from .result import Status, mls_shares, oriented_like
 
 __all__ = ["ladder", "select", "run_auto", "LADDER_EXPONENTS", "NOISE_GAIN",
@@ -151,11 +151,8 @@ def _smoothed(terms, points, k):
         return terms
     idx = np.flatnonzero(finite)
     k = min(k, len(idx))
-    p = points[idx]
-    s = power_of_two_scale(typical_extent(p))
-    with np.errstate(over="ignore"):
-        # lengths whose squares overflow (underflow): on coordinates scaled by a power of two
-        p = p * s if s != 1.0 else p
+    # lengths whose squares overflow (underflow): on coordinates scaled by a power of two
+    _, p = scaled_for_squares(points[idx])
     _, nb = cKDTree(p).query(p, k)
     missing = nb >= len(idx)      # neighbors at distances that still overflow (far points)
     nb = np.where(missing, np.arange(len(idx))[:, None], nb)
@@ -398,12 +395,8 @@ def _with_smoothing_neighbors(v, query, k):
     if len(finite) < 2 or len(wanted) == 0:
         rows = np.unique(query)
         return rows, np.searchsorted(rows, query)
-    p, q = v[finite], v[wanted]
-    s = power_of_two_scale(typical_extent(p))
-    if s != 1.0:
-        # as :func:`_smoothed` measures the distances: squares that would overflow, scaled
-        with np.errstate(over="ignore"):
-            p, q = p * s, q * s
+    # as :func:`_smoothed` measures the distances: squares that would overflow, scaled
+    _, p, q = scaled_for_squares(v[finite], v[wanted])
     _, nb = cKDTree(p).query(q, min(k, len(finite)))
     nb = np.asarray(nb).reshape(len(wanted), -1)
     near = finite[nb[nb < len(finite)]]

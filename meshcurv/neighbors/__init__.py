@@ -12,9 +12,10 @@ Modules: :mod:`~meshcurv.neighbors.grid` (dense and hashed grid ball search),
 from .grid import (BallGrid, ball_counts, ball_grid, ball_neighbors, crowd_thinning,
                    spatial_order)
 from .kring import KringWork, edge_adjacency, kring_counts, kring_neighbors
-from .radius import MAX_BALL_FRACTION, default_radius, power_of_two_scale, typical_extent
+from .radius import (MAX_BALL_FRACTION, default_radius, power_of_two_scale, scaled_for_squares,
+                     typical_extent)
 
 __all__ = ["edge_adjacency", "kring_neighbors", "kring_counts", "KringWork", "BallGrid",
            "ball_grid", "spatial_order", "ball_neighbors", "ball_counts", "crowd_thinning",
            "default_radius",
-           "power_of_two_scale", "typical_extent", "MAX_BALL_FRACTION"]
+           "power_of_two_scale", "scaled_for_squares", "typical_extent", "MAX_BALL_FRACTION"]

@@ -7,7 +7,8 @@ import numpy as np
 from numba import njit
 from scipy.spatial import cKDTree
 
-__all__ = ["default_radius", "local_radii", "power_of_two_scale", "typical_extent",
+__all__ = ["default_radius", "local_radii", "power_of_two_scale", "scaled_for_squares",
+           "typical_extent",
            "MAX_BALL_FRACTION", "PATCH_FLATNESS", "PATCH_STEP_GAIN", "PATCH_QUANTILE"]
 
 # Largest share of the points a ball may hold and still be a local patch: on a sphere a ball
@@ -69,6 +70,18 @@ def power_of_two_scale(length):
         return 1.0
     # below 2**-1000 (subnormal lengths) the exact power would overflow: 2**1000 suffices
     return float(np.ldexp(1.0, min(-int(np.frexp(length)[1]), 1000)))
+
+
+def scaled_for_squares(points, *others):
+    """``(s, points * s, *(o * s for o in others))``, ``s`` the :func:`power_of_two_scale` of
+    the points' :func:`typical_extent`: coordinates (exact multiples) in which the squares of
+    the bulk's distances stay in float64; the arrays themselves where s = 1. A point far
+    beyond the bulk may still overflow to inf there (callers treat it as missing)."""
+    s = power_of_two_scale(typical_extent(points))
+    if s == 1.0:
+        return (s, points, *others)
+    with np.errstate(over="ignore"):
+        return (s, points * s, *(o * s for o in others))
 
 
 def typical_extent(points, sample=20000, seed=0):
@@ -195,11 +208,7 @@ def local_radii(points, radii, faces=None):
     radii = [float(r) for r in radii]
     if len(radii) < 2:
         return radii
-    p = np.asarray(points, dtype=np.float64)
-    s = power_of_two_scale(typical_extent(p))
-    if s != 1.0:
-        with np.errstate(over="ignore"):
-            p = p * s
+    s, p = scaled_for_squares(np.asarray(points, dtype=np.float64))
     balls = _kring_balls(p, np.asarray(faces, dtype=np.int64)) \
         if faces is not None and len(faces) else _grid_balls(p)
     most = MAX_BALL_FRACTION * np.count_nonzero(np.isfinite(p).all(axis=1))

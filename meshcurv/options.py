@@ -297,10 +297,11 @@ class Options:
         At the default radius and with ``radius="auto"`` (a radius given is kept), each
         valid row's curvature moves towards that of a quartic height fit over the vertex's
         3-ring (a cloud point's 36 nearest) where that fit is measurably the more accurate:
-        where it differs from the circle fits by more than twice its expected error (the most
-        its residuals could move it, and its change to the 4-ring), by the part beyond
+        where it differs from the circle fits by more than a margin of its expected error
+        (on a mesh three times its standard error, on a cloud twice the most its residuals
+        could move it; with its change to the 4-ring in both), by the part beyond
         (:mod:`meshcurv.jet_blend`; ``result.jet_share``). Clean ellipsoid meshes, mean
-        |dk|: 3 / 1 / 0.5 of 2562 / 10242 vertices 0.096 / 0.016 -> 0.044 / 0.0071; 20k
+        |dk|: 3 / 1 / 0.5 of 2562 / 10242 vertices 0.096 / 0.016 -> 0.031 / 0.0048; 20k
         random vertices of an egg crate and a saddle 0.0012 / 0.0005 -> 0.00001 / 0.000001;
         no row of the noisy inputs checked took a jet (README, step 10). False: the circle
         fits (and MLS blend) alone.

@@ -30,8 +30,9 @@ Rows with w = 0 keep their bits. The residuals' part and the margin depend on th
   nearest points ends where a regular grid's rows happen to end, asymmetric about the point,
   and the jet takes up the grid's odd-order pattern, which the residuals hide: on torus
   grids of 120 x 30 and 240 x 60 points the actual error over the standard error had a
-  median of 1.7-2.5 and a 90 % quantile of 6; with the standard error at 3 (or 4) those
-  clouds lost 1.16x and 1.32x (1.06x, 1.15x), with the bound at 1 1.06x and 1.22x.
+  median of 1.7-2.5 and a 90 % quantile of 6; with the standard error and a margin of 3
+  (or 4) those clouds lost 1.16x and 1.32x (1.06x, 1.15x), with the bound and a margin of 1
+  1.06x and 1.22x.
 
 Measured once with a script (mean |dk|, circle fits -> blended, MeshLab's best on the same
 mesh in brackets; ``--accuracy-cases`` of ``scripts/compare_meshlab.py``): clean ellipsoid
@@ -171,7 +172,7 @@ def blend(result, v, f, query):
     # operators' squares stay in float64 whatever the input's scale
     unit = power_of_two_scale(result.radius)
     copied = False
-    for at, small, large, error, tu, fitted in jet_blocks(
+    for at, small, large, error, tu, rows_small in jet_blocks(
             v, f, np.asarray(query)[rows], result.normals[rows], unit, result.radius * unit):
         at = rows[at]
         n = result.normals[at]
@@ -184,7 +185,7 @@ def blend(result, v, f, query):
                 sigmas, expected = CLOUD_SIGMAS, error ** 2
             else:
                 sigmas = MESH_SIGMAS
-                expected = error ** 2 / (fitted - ring_jet_kernel.COEFFICIENTS)
+                expected = error ** 2 / (rows_small - ring_jet_kernel.COEFFICIENTS)
             expected = expected + _norm2(small - large)
             weight = np.clip(1.0 - sigmas ** 2 * expected / _norm2(diff), 0.0, 1.0)
         weight = np.where(np.isfinite(weight), weight, 0.0)

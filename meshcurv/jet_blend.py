@@ -45,8 +45,8 @@ jet uses positions alone); ellipsoid 3 / 2 / 1 of 5000 random points 0.017 / 0.0
 0.0046 / 0.0077 (mesh / points), random monkey saddle points 0.0064 -> 0.00001; every noisy
 case of the script, trimesh's coarse tori, icosahedra, spikes and terrains keep their mean
 |dk| (to 1e-9), and no row took a jet on noisy tori, ellipsoids and egg crates (noise 0.003 %
-to 0.3 % of the diagonal, meshes and points) and the benchmark clouds with position noise
-0.1. Where the mesh rule loses: MeshLab's decimations of a torus to 20 % and 5 %, 1.01x and
+to 0.3 % of the diagonal, meshes and points) and the benchmark's torus_010000 and
+goursat_025000 with position noise 0.1 (no normals). Where the mesh rule loses: MeshLab's decimations of a torus to 20 % and 5 %, 1.01x and
 1.003x (38 and 1 rows of 2880 and 720 take a jet, the circle fits were 3x more accurate
 there). The bound at 2 on meshes too (the rule before): the ellipsoids above 0.044 / 0.0070,
 0.011 / 0.0017, 0.036, 0.044. Also measured: on clouds the standard error let noise in at 2

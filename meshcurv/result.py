@@ -180,15 +180,17 @@ def curvature_fields(result):
 def mls_shares(result):
     """``result.mls_share`` as float64 (n,), 0 where no blend ran (``mls_share`` None): the
     field of every annotated file and of the pymeshlab filter."""
-    share = result.mls_share
-    return np.zeros(len(result.k1)) if share is None else np.asarray(share, dtype=np.float64)
+    return _zero_where_none(result.mls_share, len(result.k1))
 
 
 def jet_shares(result):
     """``result.jet_share`` as float64 (n,), 0 where no jet blend ran (``jet_share`` None):
     the field of every annotated file and of the pymeshlab filter."""
-    share = result.jet_share
-    return np.zeros(len(result.k1)) if share is None else np.asarray(share, dtype=np.float64)
+    return _zero_where_none(result.jet_share, len(result.k1))
+
+
+def _zero_where_none(share, n):
+    return np.zeros(n) if share is None else np.asarray(share, dtype=np.float64)
 
 
 def oriented_like(result, normals):

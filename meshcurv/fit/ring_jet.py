@@ -129,8 +129,12 @@ def ring_jet(points, query, normals, indptr, indices, inner, small, large, error
         0 where there is no small fit
     """
     m = query.shape[0]
+    most = 0
+    for q in range(m):
+        most = max(most, inner[q])
     nchunks = (m + CHUNK - 1) // CHUNK
     for c in prange(nchunks):
+        uvh = np.empty((most, 3))         # the small support's frame coordinates
         mat = np.empty((_QUARTIC, _QUARTIC))
         rhs = np.empty(_QUARTIC)
         sol = np.empty(_QUARTIC)
@@ -183,6 +187,10 @@ def ring_jet(points, query, normals, indptr, indices, inner, small, large, error
                     usable, u, v, h = _in_frame(points, k, s, x0, x1, x2, inv, frame)
                     if not usable:
                         continue
+                    if part == 0:
+                        uvh[rows - 1, 0] = u
+                        uvh[rows - 1, 1] = v
+                        uvh[rows - 1, 2] = h
                     _add_monomials(mom, 1.0, u, v, 8)
                     _add_monomials(hmom, h, u, v, 4)
                     rows += 1
@@ -201,11 +209,9 @@ def ring_jet(points, query, normals, indptr, indices, inner, small, large, error
                 # the residuals summed one by one (sum h^2 - c . rhs cancels to nothing where
                 # the fit is close), each at least the rounding of the stored coordinates
                 rss = sol[5] * sol[5]                # x itself
-                for j in range(lo, mid):
-                    usable, u, v, h = _in_frame(points, indices[j], s, x0, x1, x2, inv, frame)
-                    if usable:
-                        r = h - _quartic_at(sol, u, v)
-                        rss += r * r
+                for i in range(rows - 1):
+                    r = uvh[i, 2] - _quartic_at(sol, uvh[i, 0], uvh[i, 1])
+                    rss += r * r
                 rounding = ROUNDING * max(abs(x0), abs(x1), abs(x2)) * inv
                 rss += rows * rounding * rounding
                 factor = max(4.0 * inverse_entry(mat, _QUARTIC, 0, y),
